@@ -1,0 +1,77 @@
+"""The content-addressed media store: every file lives once, under its SHA-256.
+
+Keys look like ``ab/cd/abcd…(64 hex).png``. Writes are atomic (temporary file in the target
+directory, fsync, rename), so a crash never leaves a half-written file under a valid key, and a
+key can never name a path outside the root.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import re
+import tempfile
+from pathlib import Path
+
+_KEY = re.compile(r"^[0-9a-f]{2}/[0-9a-f]{2}/[0-9a-f]{64}\.[a-z0-9]{1,8}$")
+_EXT = re.compile(r"^[a-z0-9]{1,8}$")
+
+
+class MediaKeyError(ValueError):
+    """A key that is malformed or would leave the media root."""
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` so that readers see the old file or the whole new one."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+class MediaStore:
+    """Files under ``root`` addressed by content hash."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = Path(root).resolve()
+
+    @staticmethod
+    def key_for(data: bytes, ext: str) -> str:
+        ext = ext.lower().lstrip(".")
+        if not _EXT.match(ext):
+            raise MediaKeyError(f"bad file extension {ext!r}")
+        digest = hashlib.sha256(data).hexdigest()
+        return f"{digest[:2]}/{digest[2:4]}/{digest}.{ext}"
+
+    def put_bytes(self, data: bytes, ext: str) -> str:
+        """Store ``data`` (idempotent) and return its key."""
+        key = self.key_for(data, ext)
+        path = self.path(key)
+        if not path.exists():
+            atomic_write_bytes(path, data)
+        return key
+
+    def put_file(self, src: Path) -> str:
+        return self.put_bytes(Path(src).read_bytes(), Path(src).suffix)
+
+    def path(self, key: str) -> Path:
+        """The file of ``key``; raises :class:`MediaKeyError` for anything not a store key."""
+        if not isinstance(key, str) or not _KEY.match(key):
+            raise MediaKeyError(f"not a media key: {key!r}")
+        path = (self.root / key).resolve()
+        if not path.is_relative_to(self.root):  # e.g. a symlinked subdir pointing elsewhere
+            raise MediaKeyError(f"media key leaves the media root: {key!r}")
+        return path
+
+    def read_bytes(self, key: str) -> bytes:
+        return self.path(key).read_bytes()
+
+    def exists(self, key: str) -> bool:
+        return self.path(key).is_file()

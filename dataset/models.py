@@ -1,0 +1,303 @@
+"""The database schema: SQLAlchemy 2 typed ORM models.
+
+Every table is created by an Alembic migration (``dataset/migrations``); a test checks that the
+migrations and these models agree. Enums are stored as strings with CHECK constraints so that
+SQLite and PostgreSQL behave the same.
+"""
+
+from __future__ import annotations
+
+import enum
+from datetime import UTC, datetime
+from typing import Any
+
+from sqlalchemy import JSON, Enum, ForeignKey, Index, MetaData, String, Text, UniqueConstraint
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
+
+NAMING = {
+    "ix": "ix_%(column_0_label)s",
+    "uq": "uq_%(table_name)s_%(column_0_name)s",
+    "ck": "ck_%(table_name)s_%(constraint_name)s",
+    "fk": "fk_%(table_name)s_%(column_0_name)s_%(referred_table_name)s",
+    "pk": "pk_%(table_name)s",
+}
+
+
+def utcnow() -> datetime:
+    return datetime.now(UTC).replace(tzinfo=None)
+
+
+class Base(DeclarativeBase):
+    metadata = MetaData(naming_convention=NAMING)
+    type_annotation_map = {dict[str, Any]: JSON, list[Any]: JSON}
+
+
+def _enum(cls: type[enum.Enum]) -> Enum:
+    return Enum(
+        cls,
+        native_enum=False,
+        create_constraint=True,
+        length=32,
+        name=cls.__name__.lower(),
+        values_callable=lambda members: [m.value for m in members],
+        validate_strings=True,
+    )
+
+
+class Role(enum.StrEnum):
+    """Roles are ordered: each one may do everything the ones before it may."""
+
+    annotator = "annotator"
+    curator = "curator"
+    admin = "admin"
+
+    @property
+    def rank(self) -> int:
+        return list(Role).index(self)
+
+    def allows(self, required: Role) -> bool:
+        return self.rank >= required.rank
+
+
+class SourceKind(enum.StrEnum):
+    web = "web"
+    generated = "generated"
+    real_capture = "real_capture"
+
+
+class IllusionType(enum.StrEnum):
+    inpainting = "inpainting"
+    picture = "picture"
+    replay = "replay"
+    holography = "holography"
+    mirror = "mirror"
+
+
+class FrameState(enum.StrEnum):
+    """A frame's way through the pipeline (``rejected`` and ``deleted`` leave it)."""
+
+    ingested = "ingested"
+    prefiltered = "prefiltered"
+    approved = "approved"
+    rejected = "rejected"
+    annotated = "annotated"
+    generated = "generated"
+    accepted = "accepted"
+    deleted = "deleted"
+
+
+class JobState(enum.StrEnum):
+    queued = "queued"
+    running = "running"
+    succeeded = "succeeded"
+    failed = "failed"
+    interrupted = "interrupted"  # its worker died; retryable
+
+    @property
+    def finished(self) -> bool:
+        return self in (JobState.succeeded, JobState.failed, JobState.interrupted)
+
+
+class RegionKind(enum.StrEnum):
+    illusion = "illusion"
+    support = "support"
+
+
+class ReviewDecision(enum.StrEnum):
+    approve = "approve"
+    reject = "reject"
+
+
+class SampleState(enum.StrEnum):
+    generated = "generated"
+    accepted = "accepted"
+    rejected = "rejected"
+
+
+class User(Base):
+    __tablename__ = "users"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(String(64), unique=True)
+    password_hash: Mapped[str] = mapped_column(String(256))
+    role: Mapped[Role] = mapped_column(_enum(Role))
+    active: Mapped[bool] = mapped_column(default=True)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+    tokens: Mapped[list[ApiToken]] = relationship(back_populates="user", cascade="all, delete-orphan")
+
+
+class ApiToken(Base):
+    """A script's bearer token; only its SHA-256 is stored."""
+
+    __tablename__ = "api_tokens"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    user_id: Mapped[int] = mapped_column(ForeignKey("users.id", ondelete="CASCADE"), index=True)
+    token_sha256: Mapped[str] = mapped_column(String(64), unique=True)
+    label: Mapped[str] = mapped_column(String(128), default="")
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    last_used_at: Mapped[datetime | None]
+
+    user: Mapped[User] = relationship(back_populates="tokens")
+
+
+class Video(Base):
+    __tablename__ = "videos"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(String(256))
+    source_kind: Mapped[SourceKind] = mapped_column(_enum(SourceKind))
+    illusion_types: Mapped[list[Any]] = mapped_column(default=list)
+    content_sha256: Mapped[str] = mapped_column(String(64), unique=True)
+    original_path: Mapped[str] = mapped_column(Text, default="")
+    fps: Mapped[float | None]
+    width: Mapped[int | None]
+    height: Mapped[int | None]
+    meta: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    created_by_id: Mapped[int | None] = mapped_column(ForeignKey("users.id", ondelete="SET NULL"))
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+    frames: Mapped[list[Frame]] = relationship(back_populates="video", order_by="Frame.index")
+
+
+class Frame(Base):
+    __tablename__ = "frames"
+    __table_args__ = (
+        UniqueConstraint("video_id", "index", name="uq_frames_video_index"),
+        Index("ix_frames_state_video", "state", "video_id"),
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    video_id: Mapped[int] = mapped_column(ForeignKey("videos.id", ondelete="CASCADE"))
+    index: Mapped[int] = mapped_column(doc="Frame number in the decoded video.")
+    time_s: Mapped[float] = mapped_column(doc="Seconds from the start of the video.")
+    width: Mapped[int]
+    height: Mapped[int]
+    content_sha256: Mapped[str] = mapped_column(String(64), index=True)
+    media_key: Mapped[str] = mapped_column(String(128), doc="Left image in the media store.")
+    state: Mapped[FrameState] = mapped_column(_enum(FrameState), default=FrameState.ingested)
+    revision: Mapped[int] = mapped_column(default=1, doc="Bumped on every change; stale writes get 409.")
+    assets: Mapped[dict[str, Any]] = mapped_column(
+        default=dict, doc="Media keys of side data imported with the frame (right view, disparities, masks)."
+    )
+    updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
+
+    video: Mapped[Video] = relationship(back_populates="frames")
+
+
+class PrefilterResult(Base):
+    __tablename__ = "prefilter_results"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    frame_id: Mapped[int] = mapped_column(ForeignKey("frames.id", ondelete="CASCADE"), index=True)
+    backend: Mapped[str] = mapped_column(String(64))
+    model_id: Mapped[str] = mapped_column(String(256))
+    prompt_version: Mapped[str] = mapped_column(String(32))
+    raw_answer: Mapped[str] = mapped_column(Text, default="")
+    answers: Mapped[list[Any]] = mapped_column(default=list, doc="12 entries: true, false or null (unknown).")
+    parsed: Mapped[bool] = mapped_column(default=False)
+    keep: Mapped[bool | None]
+    metrics: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class Review(Base):
+    __tablename__ = "reviews"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    frame_id: Mapped[int] = mapped_column(ForeignKey("frames.id", ondelete="CASCADE"), index=True)
+    user_id: Mapped[int | None] = mapped_column(ForeignKey("users.id", ondelete="SET NULL"))
+    decision: Mapped[ReviewDecision] = mapped_column(_enum(ReviewDecision))
+    reason: Mapped[str] = mapped_column(String(256), default="")
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class Annotation(Base):
+    __tablename__ = "annotations"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    frame_id: Mapped[int] = mapped_column(ForeignKey("frames.id", ondelete="CASCADE"), unique=True)
+    user_id: Mapped[int | None] = mapped_column(ForeignKey("users.id", ondelete="SET NULL"))
+    version: Mapped[int] = mapped_column(default=0)
+    illusion_type: Mapped[IllusionType | None] = mapped_column(_enum(IllusionType))
+    submitted: Mapped[bool] = mapped_column(default=False)
+    lease_user_id: Mapped[int | None] = mapped_column(ForeignKey("users.id", ondelete="SET NULL"))
+    lease_expires_at: Mapped[datetime | None]
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
+
+    regions: Mapped[list[Region]] = relationship(
+        back_populates="annotation", cascade="all, delete-orphan", order_by="(Region.pair, Region.kind)"
+    )
+
+
+class Region(Base):
+    """One mask of an illusion/support pair; ``mask_rle`` is COCO RLE (pycocotools)."""
+
+    __tablename__ = "regions"
+    __table_args__ = (UniqueConstraint("annotation_id", "pair", "kind", name="uq_regions_pair_kind"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    annotation_id: Mapped[int] = mapped_column(ForeignKey("annotations.id", ondelete="CASCADE"))
+    pair: Mapped[int]
+    kind: Mapped[RegionKind] = mapped_column(_enum(RegionKind))
+    mask_rle: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    clicks: Mapped[list[Any]] = mapped_column(default=list)
+
+    annotation: Mapped[Annotation] = relationship(back_populates="regions")
+
+
+class Sample(Base):
+    """A generated stereo training sample and everything needed to judge and reproduce it."""
+
+    __tablename__ = "samples"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    frame_id: Mapped[int] = mapped_column(ForeignKey("frames.id", ondelete="CASCADE"), index=True)
+    annotation_version: Mapped[int | None]
+    state: Mapped[SampleState] = mapped_column(_enum(SampleState), default=SampleState.generated)
+    flagged: Mapped[bool] = mapped_column(default=False)
+    files: Mapped[dict[str, Any]] = mapped_column(default=dict, doc="Output name → media key.")
+    params: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    provenance: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    qa: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class Job(Base):
+    """A long-running step; the worker mirrors its state, progress and log here."""
+
+    __tablename__ = "jobs"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    kind: Mapped[str] = mapped_column(String(64), index=True)
+    state: Mapped[JobState] = mapped_column(_enum(JobState), default=JobState.queued, index=True)
+    progress: Mapped[float] = mapped_column(default=0.0, doc="0..1")
+    params: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    result: Mapped[dict[str, Any] | None] = mapped_column(JSON)
+    error: Mapped[str | None] = mapped_column(Text)
+    log: Mapped[str] = mapped_column(Text, default="")
+    attempts: Mapped[int] = mapped_column(default=0)
+    worker: Mapped[str | None] = mapped_column(String(128), doc="host:pid of the worker running it.")
+    created_by_id: Mapped[int | None] = mapped_column(ForeignKey("users.id", ondelete="SET NULL"))
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    started_at: Mapped[datetime | None]
+    finished_at: Mapped[datetime | None]
+    heartbeat_at: Mapped[datetime | None]
+
+    created_by: Mapped[User | None] = relationship()
+
+
+class AuditEntry(Base):
+    """Every human decision: who, what, on which object, when."""
+
+    __tablename__ = "audit_log"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    user_id: Mapped[int | None] = mapped_column(ForeignKey("users.id", ondelete="SET NULL"), index=True)
+    action: Mapped[str] = mapped_column(String(64))
+    target_kind: Mapped[str] = mapped_column(String(32))
+    target_id: Mapped[int | None]
+    detail: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow, index=True)

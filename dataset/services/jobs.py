@@ -1,0 +1,189 @@
+"""Job rows: the database mirror of every long step (state, progress, log, result).
+
+The queue (Huey) only carries a job id; everything a person wants to see lives in the row, so a
+job survives a restarted queue, and a job whose worker died is found and made retryable.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import time
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from datetime import timedelta
+from typing import Any
+
+from sqlalchemy import select, update
+from sqlalchemy.orm import Session, sessionmaker
+
+from dataset.db import transaction
+from dataset.media import MediaStore
+from dataset.models import Job, JobState, User, utcnow
+from dataset.services.errors import Conflict, NotFound
+
+LOG_LIMIT = 200_000  # characters kept of a job's log; the head is dropped first
+HEARTBEAT_S = 10.0
+STALE_AFTER_S = 60.0  # a running job without a heartbeat for this long has lost its worker
+
+
+def worker_id() -> str:
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+def create_job(session: Session, kind: str, params: dict[str, Any], user: User | None) -> Job:
+    job = Job(kind=kind, params=params, created_by_id=user.id if user else None)
+    session.add(job)
+    session.flush()
+    return job
+
+
+def get_job(session: Session, job_id: int) -> Job:
+    job = session.get(Job, job_id)
+    if job is None:
+        raise NotFound(f"no job {job_id}")
+    return job
+
+
+def job_json(job: Job, *, with_log: bool = False) -> dict[str, Any]:
+    data: dict[str, Any] = {
+        "id": job.id, "kind": job.kind, "state": job.state.value, "progress": job.progress,
+        "params": job.params, "result": job.result, "error": job.error, "attempts": job.attempts,
+        "worker": job.worker, "created_by": job.created_by.name if job.created_by else None,
+        "created_at": _iso(job.created_at), "started_at": _iso(job.started_at),
+        "finished_at": _iso(job.finished_at),
+    }
+    if with_log:
+        data["log"] = job.log
+    return data
+
+
+def _iso(value: Any) -> str | None:
+    return value.isoformat() + "Z" if value is not None else None
+
+
+def mark_for_retry(session: Session, job_id: int) -> Job:
+    """Put a failed or interrupted job back in the queued state (the caller enqueues it)."""
+    job = get_job(session, job_id)
+    if job.state not in (JobState.failed, JobState.interrupted):
+        raise Conflict(f"job {job_id} is {job.state.value}; only failed or interrupted jobs can be retried")
+    job.state, job.error, job.progress, job.worker, job.finished_at = JobState.queued, None, 0.0, None, None
+    return job
+
+
+def reap_lost_jobs(session: Session, *, now_host: str | None = None) -> list[int]:
+    """Mark running jobs whose worker is gone as ``interrupted``; returns their ids.
+
+    A worker is gone when it runs on this host and its process no longer exists, or when it has
+    sent no heartbeat for :data:`STALE_AFTER_S` (a worker on another machine).
+    """
+    host = now_host or socket.gethostname()
+    cutoff = utcnow() - timedelta(seconds=STALE_AFTER_S)
+    lost = []
+    for job in session.scalars(select(Job).where(Job.state == JobState.running)):
+        owner_host, _, pid = (job.worker or "").rpartition(":")
+        dead_here = owner_host == host and pid.isdigit() and not _pid_alive(int(pid))
+        silent = job.heartbeat_at is None or job.heartbeat_at < cutoff
+        if dead_here or silent:
+            job.state = JobState.interrupted
+            job.error = f"worker {job.worker} stopped while running this job; retry it"
+            job.finished_at = utcnow()
+            lost.append(job.id)
+    return lost
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def heartbeat(session: Session, worker: str) -> None:
+    session.execute(update(Job).where(Job.worker == worker, Job.state == JobState.running)
+                    .values(heartbeat_at=utcnow()))
+
+
+@dataclass
+class JobContext:
+    """What a job handler gets: its parameters, the data layer, and a way to report progress."""
+
+    job_id: int
+    params: dict[str, Any]
+    sessions: sessionmaker[Session]
+    media: MediaStore
+    settings: Any
+    _last_flush: float = field(default=0.0, repr=False)
+    _pending_log: list[str] = field(default_factory=list, repr=False)
+    _progress: float = field(default=0.0, repr=False)
+
+    def log(self, message: str) -> None:
+        self._pending_log.append(f"{time.strftime('%H:%M:%S')} {message}")
+        self._flush(force=False)
+
+    def progress(self, fraction: float, message: str | None = None) -> None:
+        """Report progress in 0..1; written to the row at most a few times a second."""
+        self._progress = min(max(float(fraction), 0.0), 1.0)
+        if message:
+            self._pending_log.append(f"{time.strftime('%H:%M:%S')} {message}")
+        self._flush(force=False)
+
+    def _flush(self, *, force: bool) -> None:
+        now = time.monotonic()
+        if not force and now - self._last_flush < 0.1:
+            return
+        self._last_flush = now
+        with transaction(self.sessions) as s:
+            job = s.get(Job, self.job_id)
+            if job is None:
+                return
+            job.progress, job.heartbeat_at = self._progress, utcnow()
+            if self._pending_log:
+                job.log = (job.log + "\n".join(self._pending_log) + "\n")[-LOG_LIMIT:]
+                self._pending_log.clear()
+
+
+Handler = Callable[[JobContext], dict[str, Any]]
+
+
+def execute_job(job_id: int, handlers: dict[str, Handler], sessions: sessionmaker[Session],
+                media: MediaStore, settings: Any) -> JobState:
+    """Run job ``job_id`` once, mirroring everything into its row.
+
+    Idempotent on delivery: a job that already succeeded, or that another live worker runs, is
+    left alone. Handlers must themselves be idempotent so that a retry after a crash does not
+    duplicate their effects.
+    """
+    me = worker_id()
+    with transaction(sessions) as s:
+        job = s.get(Job, job_id)
+        if job is None or job.state != JobState.queued:
+            return job.state if job else JobState.failed
+        job.state, job.worker, job.attempts = JobState.running, me, job.attempts + 1
+        job.started_at = job.heartbeat_at = utcnow()
+        job.log += f"--- attempt {job.attempts} on {me}\n"
+        kind, params = job.kind, dict(job.params)
+    ctx = JobContext(job_id, params, sessions, media, settings)
+    try:
+        handler = handlers.get(kind)
+        if handler is None:
+            raise LookupError(f"no handler for job kind {kind!r}")
+        result = handler(ctx)
+    except Exception as exc:  # a job's failure is data for the user, not a worker crash
+        ctx._pending_log.append(traceback.format_exc())
+        ctx._flush(force=True)
+        with transaction(sessions) as s:
+            job = s.get(Job, job_id)
+            job.state, job.finished_at = JobState.failed, utcnow()
+            job.error = f"{type(exc).__name__}: {exc}"
+        return JobState.failed
+    ctx._progress = 1.0
+    ctx._flush(force=True)
+    with transaction(sessions) as s:
+        job = s.get(Job, job_id)
+        job.state, job.result, job.finished_at = JobState.succeeded, result, utcnow()
+    return JobState.succeeded

@@ -1,0 +1,114 @@
+"""Shared fixtures: workspaces on SQLite (always) and PostgreSQL (when TEST_DATABASE_URL is set),
+an app with one user per role, and their API tokens."""
+
+from __future__ import annotations
+
+import os
+import re
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from sqlalchemy import create_engine, text
+from sqlalchemy.engine import make_url
+
+from dataset.db import migrate, normalise_url, transaction
+from dataset.models import Role
+from dataset.services import users as user_service
+from webapp.runtime import Runtime
+from webapp.settings import Settings, load_settings
+
+TEST_DATABASE_URL = os.environ.get("TEST_DATABASE_URL", "")
+TEST_REDIS_URL = os.environ.get("TEST_REDIS_URL", "")
+PASSWORD = "correct-horse-battery"
+
+
+@pytest.fixture(autouse=True)
+def _clean_env(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Tests build their settings explicitly; a developer's own ILLUSION_STUDIO_* must not leak in."""
+    for key in list(os.environ):
+        if key.startswith("ILLUSION_STUDIO_"):
+            monkeypatch.delenv(key)
+
+
+@pytest.fixture
+def postgres_url() -> Iterator[str]:
+    """A fresh, empty PostgreSQL database for one test, dropped afterwards."""
+    if not TEST_DATABASE_URL:
+        pytest.skip("PostgreSQL tests need TEST_DATABASE_URL (e.g. postgresql://postgres@127.0.0.1:5432/test)")
+    server = make_url(normalise_url(TEST_DATABASE_URL))
+    name = f"illusion_test_{uuid.uuid4().hex[:12]}"
+    admin = create_engine(server, isolation_level="AUTOCOMMIT")
+    with admin.connect() as conn:
+        conn.execute(text(f'CREATE DATABASE "{name}"'))
+    try:
+        yield server.set(database=name).render_as_string(hide_password=False)
+    finally:
+        with admin.connect() as conn:
+            conn.execute(text(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)'))
+        admin.dispose()
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def db_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
+    """The data layer runs on both backends."""
+    if request.param == "sqlite":
+        return f"sqlite:///{tmp_path / 'test.db'}"
+    return request.getfixturevalue("postgres_url")
+
+
+def make_settings(home: Path, **overrides: object) -> Settings:
+    home.mkdir(parents=True, exist_ok=True)
+    return load_settings(home, **overrides)
+
+
+@pytest.fixture
+def settings(tmp_path: Path) -> Settings:
+    s = make_settings(tmp_path / "ws")
+    migrate(s.database_url)
+    return s
+
+
+@pytest.fixture
+def runtime(settings: Settings) -> Iterator[Runtime]:
+    rt = Runtime(settings)
+    yield rt
+    rt.close()
+
+
+@pytest.fixture
+def tokens(runtime: Runtime) -> dict[str, str]:
+    """One user per role (named after the role) and a bearer token for each."""
+    out = {}
+    with transaction(runtime.sessions) as s:
+        for role in Role:
+            user = user_service.create_user(s, role.value, role, PASSWORD)
+            out[role.value] = user_service.issue_token(s, user)
+    return out
+
+
+@pytest.fixture
+def app(settings: Settings, runtime: Runtime, tokens: dict[str, str]):  # type: ignore[no-untyped-def]
+    from webapp.app import create_app
+
+    application = create_app(settings, runtime)
+    application.config["TESTING"] = True
+    return application
+
+
+@pytest.fixture
+def client(app):  # type: ignore[no-untyped-def]
+    return app.test_client()
+
+
+def csrf_from(html: str) -> str:
+    match = re.search(r'name="csrf_token"[^>]*value="([^"]+)"', html) or re.search(
+        r'<meta name="csrf-token" content="([^"]+)"', html)
+    assert match, "page carries no CSRF token"
+    return match.group(1)
+
+
+def login(client, name: str, password: str = PASSWORD):  # type: ignore[no-untyped-def]
+    token = csrf_from(client.get("/login").get_data(as_text=True))
+    return client.post("/login", data={"name": name, "password": password, "csrf_token": token})

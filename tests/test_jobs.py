@@ -1,0 +1,194 @@
+"""The job queue with real worker processes: SQLite queue always, Redis when TEST_REDIS_URL is set."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+import uuid
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+from sqlalchemy import func, select
+
+from dataset.db import migrate, transaction
+from dataset.models import Frame, Job, JobState
+from dataset.services import jobs as job_service
+from dataset.synthetic import write_synthetic_dataset
+from webapp.jobs.handlers import HANDLERS
+from webapp.runtime import Runtime
+from webapp.settings import Settings
+from tests.conftest import TEST_REDIS_URL, make_settings
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(params=["sqlite", "redis"])
+def queue_settings(request: pytest.FixtureRequest, tmp_path: Path) -> Settings:
+    home = tmp_path / "ws"
+    home.mkdir()
+    if request.param == "redis":
+        if not TEST_REDIS_URL:
+            pytest.skip("Redis queue tests need TEST_REDIS_URL (e.g. redis://127.0.0.1:6379/0)")
+        # A queue name of its own, so parallel or leftover runs never share a backlog.
+        (home / "illusion-studio.toml").write_text(
+            f'queue_url = "{TEST_REDIS_URL}"\nqueue_name = "test-{uuid.uuid4().hex[:8]}"\n')
+    settings = make_settings(home)
+    migrate(settings.database_url)
+    return settings
+
+
+@pytest.fixture
+def rt(queue_settings: Settings) -> Iterator[Runtime]:
+    runtime = Runtime(queue_settings)
+    yield runtime
+    if queue_settings.queue_url:
+        runtime.queue.huey.flush()
+    runtime.close()
+
+
+@pytest.fixture
+def start_worker(queue_settings: Settings) -> Iterator[Callable[[], subprocess.Popen[bytes]]]:
+    """Start real `illusion-studio worker` processes; all are stopped after the test."""
+    procs: list[subprocess.Popen[bytes]] = []
+
+    def start() -> subprocess.Popen[bytes]:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "webapp.cli", "--data-dir", str(queue_settings.home), "worker"],
+            cwd=ROOT, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        procs.append(proc)
+        return proc
+
+    yield start
+    for proc in procs:
+        if proc.poll() is None:
+            proc.terminate()
+    for proc in procs:
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+
+
+def submit_import(rt: Runtime, path: Path) -> int:
+    with transaction(rt.sessions) as s:
+        return rt.queue.submit(s, "import_synthetic", {"path": str(path)}, None).id
+
+
+def wait_for(rt: Runtime, job_id: int, predicate: Callable[[Job], bool], timeout: float = 90) -> Job:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        with rt.sessions() as s:
+            job = s.get(Job, job_id)
+            if predicate(job):
+                return job
+        time.sleep(0.01)
+    raise AssertionError(f"job {job_id} never reached the expected state; last: {job.state} {job.progress} {job.error}")
+
+
+def frame_count(rt: Runtime) -> int:
+    with rt.sessions() as s:
+        return s.scalar(select(func.count()).select_from(Frame))
+
+
+def test_worker_runs_an_import_job(rt: Runtime, start_worker, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    [video] = write_synthetic_dataset(tmp_path / "synth", videos=1, seed=3, n_frames=6, width=128, height=72)
+    job_id = submit_import(rt, video)
+    start_worker()
+    job = wait_for(rt, job_id, lambda j: j.state.finished)
+    assert job.state == JobState.succeeded, job.error
+    assert job.progress == 1.0 and job.attempts == 1
+    assert job.result == {"video_id": job.result["video_id"], "frames": 6, "new_frames": 6}
+    assert "frame 5" in job.log
+    assert frame_count(rt) == 6
+
+
+def test_sigkilled_worker_leaves_the_job_retryable(rt: Runtime, start_worker, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    n = 40
+    warmup, video = write_synthetic_dataset(tmp_path / "synth", videos=2, seed=5, n_frames=n, width=160, height=90)
+    worker = start_worker()
+    wait_for(rt, submit_import(rt, warmup), lambda j: j.state == JobState.succeeded)  # the worker is up and idle
+    before = frame_count(rt)
+
+    # Single-step the worker (SIGCONT for a few ms, then SIGSTOP) so the kill lands mid-job on any machine.
+    worker.send_signal(signal.SIGSTOP)
+    job_id = submit_import(rt, video)
+    for _ in range(5000):
+        worker.send_signal(signal.SIGCONT)
+        time.sleep(0.002)
+        worker.send_signal(signal.SIGSTOP)
+        if frame_count(rt) > before:
+            break
+    worker.send_signal(signal.SIGKILL)
+    worker.wait(timeout=10)
+    partial = frame_count(rt) - before
+    assert 0 < partial < n, "the kill must land mid-way for this test to mean anything"
+    with rt.sessions() as s:
+        assert s.get(Job, job_id).state == JobState.running  # what a crash leaves behind
+
+    start_worker()  # a new worker notices the dead one and marks its job interrupted
+    job = wait_for(rt, job_id, lambda j: j.state == JobState.interrupted, timeout=30)
+    assert "retry" in job.error
+
+    rt.queue.retry(job_id)
+    job = wait_for(rt, job_id, lambda j: j.state.finished)
+    assert job.state == JobState.succeeded, job.error
+    assert job.attempts == 2
+    assert job.result["new_frames"] == n - partial
+    assert frame_count(rt) == before + n  # nothing duplicated, nothing missing
+    with rt.sessions() as s:
+        keys = s.scalars(select(Frame.media_key)).all()
+    assert all(rt.media.exists(k) for k in keys)
+
+
+def test_two_workers_share_one_backlog(rt: Runtime, start_worker, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    videos = write_synthetic_dataset(tmp_path / "synth", videos=4, seed=10, n_frames=3, width=96, height=64)
+    job_ids = [submit_import(rt, v) for v in videos]
+    start_worker()
+    start_worker()
+    jobs = [wait_for(rt, j, lambda job: job.state.finished) for j in job_ids]
+    assert [j.state for j in jobs] == [JobState.succeeded] * 4
+    assert all(j.attempts == 1 for j in jobs), "a job ran twice"
+    assert frame_count(rt) == 12
+
+
+def test_a_failing_job_records_a_readable_reason(runtime: Runtime, tmp_path: Path) -> None:
+    with transaction(runtime.sessions) as s:
+        job_id = job_service.create_job(s, "import_synthetic", {"path": str(tmp_path / "nowhere")}, None).id
+    state = job_service.execute_job(job_id, HANDLERS, runtime.sessions, runtime.media, runtime.settings)
+    assert state == JobState.failed
+    with runtime.sessions() as s:
+        job = s.get(Job, job_id)
+        assert job.error.startswith("InvalidInput:") and "not a synthetic video" in job.error
+        assert "Traceback" in job.log
+
+
+def test_redelivered_job_runs_once(runtime: Runtime, tmp_path: Path) -> None:
+    [video] = write_synthetic_dataset(tmp_path / "synth", videos=1, seed=1, n_frames=2, width=96, height=64)
+    with transaction(runtime.sessions) as s:
+        job_id = job_service.create_job(s, "import_synthetic", {"path": str(video)}, None).id
+    args = (HANDLERS, runtime.sessions, runtime.media, runtime.settings)
+    assert job_service.execute_job(job_id, *args) == JobState.succeeded
+    assert job_service.execute_job(job_id, *args) == JobState.succeeded  # a duplicate delivery is a no-op
+    with runtime.sessions() as s:
+        assert s.get(Job, job_id).attempts == 1
+
+
+def test_reaper_marks_jobs_of_dead_workers(runtime: Runtime) -> None:
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    with transaction(runtime.sessions) as s:
+        job = job_service.create_job(s, "import_synthetic", {}, None)
+        job.state, job.worker = JobState.running, f"{job_service.worker_id().rpartition(':')[0]}:{dead.pid}"
+        job.heartbeat_at = job.created_at
+        alive = job_service.create_job(s, "import_synthetic", {}, None)
+        alive.state, alive.worker = JobState.running, job_service.worker_id()
+        alive.heartbeat_at = alive.created_at
+    with transaction(runtime.sessions) as s:
+        assert job_service.reap_lost_jobs(s) == [job.id]
+    with transaction(runtime.sessions) as s:
+        assert job_service.mark_for_retry(s, job.id).state == JobState.queued

@@ -1,0 +1,85 @@
+"""Walk every route with every role and check the allowed/denied matrix.
+
+The expected least role of each endpoint is written out here, independently of the views, so a
+route added without an entry, or a role changed by accident, fails this test.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from dataset.models import Role
+from tests.conftest import login
+
+PUBLIC = None
+EXPECTED: dict[str, Role | None] = {
+    "pages.healthz": PUBLIC,
+    "pages.login": PUBLIC,
+    "pages.logout": Role.annotator,
+    "pages.dashboard": Role.annotator,
+    "pages.frames": Role.annotator,
+    "pages.jobs": Role.annotator,
+    "pages.users": Role.admin,
+    "pages.create_user": Role.admin,
+    "media.serve": Role.annotator,
+    "api.openapi": Role.annotator,
+    "api.me": Role.annotator,
+    "api.list_users": Role.admin,
+    "api.create_user": Role.admin,
+    "api.frames": Role.annotator,
+    "api.funnel": Role.annotator,
+    "api.list_jobs": Role.annotator,
+    "api.get_job": Role.annotator,
+    "api.retry_job": Role.curator,
+}
+SAMPLE_ARGS = {"job_id": "1", "key": "ab/cd/" + "ab" * 32 + ".png"}
+CALLERS = ["anonymous", *(r.value for r in Role)]
+
+
+def _routes(app):  # type: ignore[no-untyped-def]
+    for rule in app.url_map.iter_rules():
+        if rule.endpoint == "static":
+            continue
+        path = rule.rule
+        for name in rule.arguments:
+            path = path.replace(f"<int:{name}>", SAMPLE_ARGS[name]).replace(f"<path:{name}>", SAMPLE_ARGS[name])
+            path = path.replace(f"<{name}>", SAMPLE_ARGS[name])
+        for method in sorted(rule.methods - {"HEAD", "OPTIONS"}):
+            yield rule.endpoint, method, path
+
+
+def test_every_route_is_in_the_matrix(app) -> None:  # type: ignore[no-untyped-def]
+    assert {endpoint for endpoint, _, _ in _routes(app)} == set(EXPECTED)
+
+
+@pytest.mark.parametrize("caller", CALLERS)
+def test_role_matrix(app, client, tokens, caller: str) -> None:  # type: ignore[no-untyped-def]
+    headers = {} if caller == "anonymous" else {"Authorization": f"Bearer {tokens[caller]}"}
+    failures = []
+    for endpoint, method, path in _routes(app):
+        required = EXPECTED[endpoint]
+        allowed = required is PUBLIC or (caller != "anonymous" and Role(caller).allows(required))
+        response = client.open(path, method=method, headers=headers, json={} if method == "POST" else None)
+        denied = response.status_code in (401, 403) or (
+            response.status_code == 302 and "/login?next=" in response.location)
+        if allowed == denied:
+            failures.append(f"{caller} {method} {path} -> {response.status_code} (expected {'allowed' if allowed else 'denied'})")
+        if denied and caller == "anonymous" and path.startswith("/api/"):
+            assert response.status_code == 401 and response.is_json, path
+        if denied and caller != "anonymous":
+            assert response.status_code == 403, path
+    assert not failures, "\n".join(failures)
+
+
+@pytest.mark.parametrize("caller", [r.value for r in Role])
+def test_session_login_sees_the_same_matrix_for_pages(app, caller: str) -> None:  # type: ignore[no-untyped-def]
+    client = app.test_client()
+    assert login(client, caller).status_code == 302
+    for endpoint, method, path in _routes(app):
+        if method != "GET" or endpoint in ("pages.login", "pages.healthz"):
+            continue
+        status = client.get(path).status_code
+        if Role(caller).allows(EXPECTED[endpoint]):
+            assert status not in (401, 403), (caller, path, status)
+        else:
+            assert status == 403, (caller, path, status)

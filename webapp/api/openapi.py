@@ -1,0 +1,89 @@
+"""The OpenAPI 3.1 description of ``/api/v1`` (a test keeps it and the routes in step)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+_ERR = {"description": "error", "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Error"}}}}
+
+
+def _op(summary: str, role: str, *, params: list[dict[str, Any]] | None = None,
+        body: str | None = None, ok: str = "200", schema: str | None = None) -> dict[str, Any]:
+    op: dict[str, Any] = {
+        "summary": summary,
+        "description": f"Needs the **{role}** role (or higher).",
+        "parameters": params or [],
+        "responses": {
+            ok: {"description": "success", "content": {"application/json": {"schema": {"$ref": f"#/components/schemas/{schema}"}}}}
+            if schema else {"description": "success"},
+            "401": _ERR, "403": _ERR,
+        },
+    }
+    if body:
+        op["requestBody"] = {"required": True, "content": {"application/json": {"schema": {"$ref": f"#/components/schemas/{body}"}}}}
+        op["responses"]["400"] = _ERR
+    return op
+
+
+def _q(name: str, typ: str = "integer", desc: str = "") -> dict[str, Any]:
+    return {"name": name, "in": "query", "required": False, "schema": {"type": typ}, "description": desc}
+
+
+_JOB_ID = {"name": "job_id", "in": "path", "required": True, "schema": {"type": "integer"}}
+
+
+def openapi_document() -> dict[str, Any]:
+    return {
+        "openapi": "3.1.0",
+        "info": {"title": "Illusion Studio API", "version": "1"},
+        "servers": [{"url": "/api/v1"}],
+        "security": [{"bearer": []}, {"session": []}],
+        "paths": {
+            "/openapi.json": {"get": _op("This document", "annotator")},
+            "/me": {"get": _op("The calling user", "annotator", schema="User")},
+            "/users": {
+                "get": _op("List users", "admin", schema="UserList"),
+                "post": _op("Create a user", "admin", body="NewUser", ok="201", schema="User"),
+            },
+            "/frames": {"get": _op("List frames, ordered by video and time", "annotator", schema="FrameList",
+                                   params=[_q("video_id"), _q("state", "string", "ingested, prefiltered, approved, …"),
+                                           _q("limit", desc="1..10000, default 100"), _q("offset")])},
+            "/stats/funnel": {"get": _op("Pipeline funnel counts", "annotator", schema="Funnel")},
+            "/jobs": {"get": _op("List jobs (annotators: their own)", "annotator", schema="JobList",
+                                 params=[_q("state", "string"), _q("limit", desc="1..500, default 50")])},
+            "/jobs/{job_id}": {"get": _op("One job with its log", "annotator", params=[_JOB_ID], schema="Job")},
+            "/jobs/{job_id}/retry": {"post": _op("Retry a failed or interrupted job", "curator",
+                                                 params=[_JOB_ID], ok="202", schema="Job")},
+        },
+        "components": {
+            "securitySchemes": {
+                "bearer": {"type": "http", "scheme": "bearer", "description": "`illusion-studio users token NAME`"},
+                "session": {"type": "apiKey", "in": "cookie", "name": "session",
+                            "description": "Browser session; state-changing calls also need the X-CSRFToken header."},
+            },
+            "schemas": {
+                "Error": {"type": "object", "properties": {"error": {"type": "string"}, "status": {"type": "integer"}}},
+                "User": {"type": "object", "properties": {"id": {"type": "integer"}, "name": {"type": "string"},
+                                                          "role": {"enum": ["annotator", "curator", "admin"]}}},
+                "UserList": {"type": "object", "properties": {"items": {"type": "array", "items": {"$ref": "#/components/schemas/User"}}}},
+                "NewUser": {"type": "object", "required": ["name", "role", "password"],
+                            "properties": {"name": {"type": "string"}, "role": {"enum": ["annotator", "curator", "admin"]},
+                                           "password": {"type": "string", "minLength": 8}}},
+                "Frame": {"type": "object", "properties": {
+                    "id": {"type": "integer"}, "video_id": {"type": "integer"}, "index": {"type": "integer"},
+                    "time_s": {"type": "number", "description": "seconds into the video"},
+                    "width": {"type": "integer"}, "height": {"type": "integer"}, "state": {"type": "string"},
+                    "revision": {"type": "integer"}, "image": {"type": "string", "description": "media key; GET /media/{key}"},
+                    "prefilter_keep": {"type": ["boolean", "null"]}}},
+                "FrameList": {"type": "object", "properties": {"items": {"type": "array", "items": {"$ref": "#/components/schemas/Frame"}},
+                                                               "total": {"type": "integer"}}},
+                "Funnel": {"type": "object", "additionalProperties": {"type": "integer"}},
+                "Job": {"type": "object", "properties": {
+                    "id": {"type": "integer"}, "kind": {"type": "string"},
+                    "state": {"enum": ["queued", "running", "succeeded", "failed", "interrupted"]},
+                    "progress": {"type": "number", "minimum": 0, "maximum": 1}, "error": {"type": ["string", "null"]},
+                    "result": {}, "log": {"type": "string"}}},
+                "JobList": {"type": "object", "properties": {"items": {"type": "array", "items": {"$ref": "#/components/schemas/Job"}}}},
+            },
+        },
+    }

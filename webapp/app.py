@@ -1,0 +1,89 @@
+"""The Flask app factory."""
+
+from __future__ import annotations
+
+import secrets
+from pathlib import Path
+from typing import Any
+
+from flask import Flask, g, render_template
+from flask_wtf.csrf import CSRFError
+from werkzeug.exceptions import HTTPException
+
+from dataset.media import atomic_write_bytes
+from dataset.services.errors import ServiceError
+from webapp.auth import init_auth, is_api_request, json_error
+from webapp.runtime import Runtime
+from webapp.settings import Settings
+
+STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
+
+
+def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
+    """Build the app for ``settings``; tests may pass a shared ``runtime``."""
+    rt = runtime or Runtime(settings)
+    app = Flask(__name__, static_folder=str(STATIC_DIR), static_url_path="/static")
+    app.config.update(
+        SECRET_KEY=settings.secret_key or _stored_secret(settings.home),
+        MAX_CONTENT_LENGTH=settings.max_upload_mb * 1024 * 1024,
+        SESSION_COOKIE_HTTPONLY=True,
+        SESSION_COOKIE_SAMESITE="Lax",
+    )
+    app.json.sort_keys = False  # type: ignore[attr-defined]
+    app.extensions["runtime"] = rt
+
+    @app.before_request
+    def _open_session() -> None:
+        g.db = rt.sessions()
+
+    @app.teardown_request
+    def _close_session(_exc: BaseException | None) -> None:
+        db = g.pop("db", None)
+        if db is not None:
+            db.close()
+
+    init_auth(app)
+
+    from webapp.api import api
+    from webapp.views.media import media
+    from webapp.views.pages import pages
+
+    app.register_blueprint(pages)
+    app.register_blueprint(media)
+    app.register_blueprint(api, url_prefix="/api/v1")
+    _register_errors(app)
+    return app
+
+
+def runtime() -> Runtime:
+    from flask import current_app
+
+    return current_app.extensions["runtime"]
+
+
+def _stored_secret(home: Path) -> str:
+    """A per-workspace secret key, created on first use, so sessions survive restarts."""
+    path = home / "secret_key"
+    if not path.exists():
+        atomic_write_bytes(path, secrets.token_hex(32).encode())
+        path.chmod(0o600)
+    return path.read_text().strip()
+
+
+def _register_errors(app: Flask) -> None:
+    def render(status: int, message: str) -> Any:
+        if is_api_request():
+            return json_error(status, message)
+        return render_template("error.html", status=status, message=message), status
+
+    @app.errorhandler(ServiceError)
+    def _service_error(exc: ServiceError) -> Any:
+        return render(exc.status, str(exc))
+
+    @app.errorhandler(CSRFError)
+    def _csrf_error(exc: CSRFError) -> Any:
+        return render(400, f"CSRF check failed: {exc.description}; reload the page and try again")
+
+    @app.errorhandler(HTTPException)
+    def _http_error(exc: HTTPException) -> Any:
+        return render(exc.code or 500, exc.description or exc.name)

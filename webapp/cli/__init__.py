@@ -1,0 +1,29 @@
+"""The ``illusion-studio`` command line: one click group, a module per topic."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from webapp.cli.jobs import jobs, worker
+from webapp.cli.state import CliState
+from webapp.cli.users import users
+from webapp.cli.workspace import demo, init, serve, synth
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.option(
+    "--data-dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Workspace directory (default: $ILLUSION_STUDIO_HOME).",
+)
+@click.pass_context
+def main(ctx: click.Context, data_dir: Path | None) -> None:
+    """Illusion Studio: build stereo depth datasets of 3D visual illusions."""
+    ctx.obj = CliState(data_dir)
+
+
+for command in (init, serve, worker, demo, synth, users, jobs):
+    main.add_command(command)

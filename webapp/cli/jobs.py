@@ -1,0 +1,68 @@
+"""`illusion-studio worker` and `illusion-studio jobs …`."""
+
+from __future__ import annotations
+
+import json
+import logging
+
+import click
+from sqlalchemy import select
+
+from dataset.db import transaction
+from dataset.models import Job
+from dataset.services import jobs as job_service
+from webapp.cli.errors import service_errors
+from webapp.cli.state import CliState, pass_state
+
+
+@click.command()
+@click.option("--concurrency", default=1, show_default=True, type=click.IntRange(1, 64),
+              help="Jobs run at once by this worker (threads). Run more workers for more processes.")
+@pass_state
+def worker(state: CliState, concurrency: int) -> None:
+    """Run jobs from the queue until interrupted (Ctrl-C). Start as many as you like."""
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    queue = state.runtime.queue
+    click.echo(f"worker {job_service.worker_id()} on {state.settings.queue_url or state.settings.queue_path}", err=True)
+    queue.run_worker(concurrency)
+
+
+@click.group()
+def jobs() -> None:
+    """Inspect and retry jobs."""
+
+
+@jobs.command("list")
+@click.option("--state", "state_filter", default=None, help="Only jobs in this state.")
+@click.option("--json", "as_json", is_flag=True, help="Print a JSON array.")
+@pass_state
+def list_jobs(state: CliState, state_filter: str | None, as_json: bool) -> None:
+    with state.runtime.sessions() as s:
+        query = select(Job).order_by(Job.id)
+        if state_filter:
+            query = query.where(Job.state == state_filter)
+        rows = [job_service.job_json(j) for j in s.scalars(query)]
+    if as_json:
+        click.echo(json.dumps(rows, indent=2))
+        return
+    for j in rows:
+        click.echo(f"{j['id']:>5} {j['kind']:<20} {j['state']:<12} {j['progress'] * 100:5.1f}%  {j['error'] or ''}")
+
+
+@jobs.command("retry")
+@click.argument("job_id", type=int)
+@pass_state
+def retry(state: CliState, job_id: int) -> None:
+    """Queue a failed or interrupted job again."""
+    with service_errors():
+        state.runtime.queue.retry(job_id)
+    click.echo(f"job {job_id} queued again")
+
+
+@jobs.command("show")
+@click.argument("job_id", type=int)
+@pass_state
+def show(state: CliState, job_id: int) -> None:
+    """Print one job with its log as JSON."""
+    with service_errors(), transaction(state.runtime.sessions) as s:
+        click.echo(json.dumps(job_service.job_json(job_service.get_job(s, job_id), with_log=True), indent=2))

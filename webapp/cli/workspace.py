@@ -1,0 +1,160 @@
+"""`init`, `serve`, `synth` and `demo`: set up a workspace and run the app."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import click
+from sqlalchemy import select
+
+from dataset.db import migrate, transaction
+from dataset.models import Role, User, Video
+from dataset.services import jobs as job_service
+from dataset.services import users as user_service
+from webapp.cli.state import CliState, pass_state
+from webapp.settings import HOME_ENV, Settings, SettingsError, load_settings
+
+DEMO_DIR = Path("var/demo")
+DEMO_PASSWORD = "{role}-demo"
+
+
+def init_workspace(data_dir: Path | None) -> Settings:
+    """Create the data dir (if needed) and bring its database to the newest schema."""
+    try:
+        if data_dir is None:
+            settings = load_settings(None, must_exist=False)
+        else:
+            settings = load_settings(data_dir, must_exist=False)
+    except SettingsError as exc:
+        raise click.ClickException(str(exc)) from None
+    for path in (settings.home, settings.media_root, settings.cache_dir):
+        path.mkdir(parents=True, exist_ok=True)
+    migrate(settings.database_url)
+    return settings
+
+
+@click.command()
+@pass_state
+def init(state: CliState) -> None:
+    """Create (or upgrade) the workspace: directories, database schema, secret key."""
+    settings = init_workspace(state.data_dir)
+    click.echo(f"workspace ready at {settings.home} (database {_redact(settings.database_url)})")
+
+
+def _redact(url: str) -> str:
+    from sqlalchemy.engine import make_url
+
+    return make_url(url).render_as_string(hide_password=True)
+
+
+@click.command()
+@click.option("--host", default=None, help="Bind address (default from settings: 127.0.0.1).")
+@click.option("--port", default=None, type=int, help="Port (default from settings: 5000).")
+@click.option("--threads", default=8, show_default=True, type=click.IntRange(1, 128))
+@pass_state
+def serve(state: CliState, host: str | None, port: int | None, threads: int) -> None:
+    """Run the web app with waitress."""
+    _serve(state, host, port, threads)
+
+
+def _serve(state: CliState, host: str | None, port: int | None, threads: int) -> None:
+    import waitress
+
+    from webapp.app import create_app
+
+    app = create_app(state.settings, state.runtime)
+    host = host or state.settings.host
+    port = port or state.settings.port
+    click.echo(f"Illusion Studio at http://{host}:{port}/  (Ctrl-C to stop)", err=True)
+    waitress.serve(app, host=host, port=port, threads=threads, ident="illusion-studio")
+
+
+@click.command()
+@click.argument("out_dir", type=click.Path(file_okay=False, path_type=Path))
+@click.option("--videos", default=3, show_default=True, type=click.IntRange(1, 1000))
+@click.option("--seed", default=0, show_default=True, type=int)
+@click.option("--frames", "n_frames", default=12, show_default=True, type=click.IntRange(1, 10_000))
+@click.option("--size", default="640x360", show_default=True, help="WIDTHxHEIGHT in pixels.")
+def synth(out_dir: Path, videos: int, seed: int, n_frames: int, size: str) -> None:
+    """Render synthetic illusion videos (picture + mirror, with exact ground truth) into OUT_DIR."""
+    from dataset.synthetic import write_synthetic_dataset
+
+    width, height = _parse_size(size)
+    with click.progressbar(length=videos, label="rendering", file=sys.stderr) as bar:
+        paths = []
+        for k in range(videos):
+            paths += write_synthetic_dataset(out_dir, videos=1, seed=seed + k, n_frames=n_frames,
+                                             width=width, height=height)
+            bar.update(1)
+    for path in paths:
+        click.echo(str(path))
+
+
+def _parse_size(size: str) -> tuple[int, int]:
+    try:
+        width, height = (int(v) for v in size.lower().split("x"))
+    except ValueError:
+        raise click.ClickException(f"--size: {size!r} is not WIDTHxHEIGHT") from None
+    if not (16 <= width <= 8192 and 16 <= height <= 8192):
+        raise click.ClickException("--size: width and height must be 16..8192")
+    return width, height
+
+
+@click.command()
+@click.option("--no-serve", is_flag=True, help="Set everything up, run the import jobs, then exit.")
+@click.option("--videos", default=3, show_default=True, type=click.IntRange(1, 50))
+@click.option("--host", default=None, help="Bind address (default 127.0.0.1).")
+@click.option("--port", default=None, type=int, help="Port (default 5000).")
+@pass_state
+def demo(state: CliState, no_serve: bool, videos: int, host: str | None, port: int | None) -> None:
+    """A ready-to-click workspace in ./var/demo: synthetic videos, one user per role, worker and server."""
+    from dataset.synthetic import write_synthetic_dataset
+
+    if state.data_dir is None:
+        state.data_dir = DEMO_DIR.resolve()
+    settings = init_workspace(state.data_dir)
+    rt = state.runtime
+    synth_dir = settings.home / "synthetic"
+    video_dirs = sorted(p for p in synth_dir.glob("synthetic-*") if (p / "scene.json").is_file())
+    if len(video_dirs) < videos:
+        click.echo(f"rendering {videos} synthetic videos into {synth_dir} …", err=True)
+        video_dirs = write_synthetic_dataset(synth_dir, videos=videos, seed=0)
+
+    logins = []
+    with transaction(rt.sessions) as s:
+        for role in Role:
+            password = DEMO_PASSWORD.format(role=role.value)
+            if s.scalar(select(User.id).where(User.name == role.value)) is None:
+                user_service.create_user(s, role.value, role, password)
+            logins.append((role.value, password))
+        admin = s.scalar(select(User).where(User.name == Role.admin.value))
+        imported = set(s.scalars(select(Video.original_path)))
+        jobs = [rt.queue.submit(s, "import_synthetic", {"path": str(p)}, admin)
+                for p in video_dirs if str(p) not in imported]
+    job_ids = [j.id for j in jobs]
+
+    click.echo("\nDemo users (name / password):")
+    for name, password in logins:
+        click.echo(f"  {name:<10} {password}")
+
+    if no_serve:
+        from webapp.jobs.handlers import HANDLERS
+
+        # The same code a worker runs, in this process, so the workspace is complete on exit.
+        for job_id in job_ids:
+            state_ = job_service.execute_job(job_id, HANDLERS, rt.sessions, rt.media, settings)
+            click.echo(f"import job {job_id}: {state_.value}")
+        click.echo(f"\nworkspace ready at {settings.home}; run `illusion-studio --data-dir {settings.home} serve`")
+        return
+
+    env = {**os.environ, HOME_ENV: str(settings.home)}
+    worker = subprocess.Popen([sys.executable, "-m", "webapp.cli", "worker"], env=env)
+    click.echo(f"worker started (pid {worker.pid}); importing {len(job_ids)} videos in the background", err=True)
+    try:
+        _serve(state, host, port, threads=8)
+    finally:
+        worker.terminate()
+        worker.wait(timeout=30)

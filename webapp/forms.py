@@ -1,0 +1,25 @@
+"""Flask-WTF forms (each carries its CSRF token)."""
+
+from __future__ import annotations
+
+from flask_wtf import FlaskForm
+from wtforms import PasswordField, SelectField, StringField
+from wtforms.validators import DataRequired, Length
+
+from dataset.models import Role
+from dataset.services.users import MIN_PASSWORD
+
+
+class LoginForm(FlaskForm):
+    name = StringField("User name", validators=[DataRequired(), Length(max=64)])
+    password = PasswordField("Password", validators=[DataRequired()])
+
+
+class LogoutForm(FlaskForm):
+    pass
+
+
+class CreateUserForm(FlaskForm):
+    name = StringField("User name", validators=[DataRequired(), Length(max=64)])
+    role = SelectField("Role", choices=[r.value for r in Role])
+    password = PasswordField("Password", validators=[DataRequired(), Length(min=MIN_PASSWORD)])

@@ -1,0 +1,1 @@
+"""Job queue wiring: Huey carries job ids; handlers live in the services."""

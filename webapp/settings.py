@@ -1,0 +1,119 @@
+"""The one typed settings object of Illusion Studio.
+
+Values come, highest priority first, from environment variables (``ILLUSION_STUDIO_*``), the
+optional TOML file ``illusion-studio.toml`` in the data dir, and the defaults below. Only this
+module reads the environment; everything else receives a :class:`Settings` instance.
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import Field, ValidationError, model_validator
+from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, SettingsConfigDict
+
+ENV_PREFIX = "ILLUSION_STUDIO_"
+HOME_ENV = ENV_PREFIX + "HOME"
+SETTINGS_FILE = "illusion-studio.toml"
+
+
+class SettingsError(ValueError):
+    """A settings problem a user can fix; the message is one line naming it."""
+
+
+class Settings(BaseSettings):
+    """Where the data lives, which services and model backends to use, where to listen."""
+
+    model_config = SettingsConfigDict(env_prefix=ENV_PREFIX, extra="forbid", frozen=True)
+
+    home: Path = Field(description="Data dir: database, queue, media, caches.")
+    database_url: str = Field("", description="SQLAlchemy URL; default SQLite (WAL) in the data dir.")
+    queue_url: str = Field("", description="redis://… for Redis; default a SQLite queue in the data dir.")
+    queue_name: str = Field("illusion-studio", description="Queue (Redis key prefix); workers of one deployment share it.")
+    media_root: Path = Field(Path(), description="Content-addressed media store; default <home>/media.")
+    host: str = "127.0.0.1"
+    port: int = Field(5000, ge=1, le=65535)
+    secret_key: str = Field("", description="Flask session key; default one generated into the data dir.")
+    max_upload_mb: int = Field(2048, gt=0)
+    # Model backends: each has a weight-free default; the others load from a local directory.
+    segmenter: Literal["classical", "sam2"] = "classical"
+    sam2_model_path: Path | None = None
+    depth_backend: Literal["precomputed", "depth-anything-v2"] = "precomputed"
+    depth_model_path: Path | None = None
+    vlm_backend: Literal["heuristic", "openai", "transformers"] = "heuristic"
+    vlm_base_url: str = "http://127.0.0.1:8000/v1"
+    vlm_model: str = "Qwen2-VL-72B-Instruct"
+    vlm_api_key: str = ""
+    vlm_model_path: Path | None = None
+    inpaint_backend: Literal["telea", "ns", "none", "lama"] = "telea"
+    lama_model_path: Path | None = None
+    device: str = Field("cpu", description="torch device for model backends: cpu, cuda, cuda:1 …")
+
+    @classmethod
+    def settings_customise_sources(
+        cls,
+        settings_cls: type[BaseSettings],
+        init_settings: PydanticBaseSettingsSource,
+        env_settings: PydanticBaseSettingsSource,
+        dotenv_settings: PydanticBaseSettingsSource,
+        file_secret_settings: PydanticBaseSettingsSource,
+    ) -> tuple[PydanticBaseSettingsSource, ...]:
+        # Init kwargs carry the TOML file's values, so the environment must rank above them.
+        return env_settings, init_settings
+
+    @model_validator(mode="after")
+    def _fill_paths(self) -> Settings:
+        home = self.home.expanduser().resolve()
+        object.__setattr__(self, "home", home)
+        if not self.database_url:
+            object.__setattr__(self, "database_url", f"sqlite:///{home / 'illusion-studio.db'}")
+        media = self.media_root if str(self.media_root) not in ("", ".") else home / "media"
+        object.__setattr__(self, "media_root", media.expanduser().resolve())
+        return self
+
+    @property
+    def queue_path(self) -> Path:
+        """SQLite file of the default job queue."""
+        return self.home / "queue.db"
+
+    @property
+    def cache_dir(self) -> Path:
+        return self.home / "cache"
+
+
+def load_settings(
+    data_dir: Path | str | None = None,
+    *,
+    must_exist: bool = True,
+    **overrides: Any,
+) -> Settings:
+    """Build the settings for ``data_dir`` (default ``$ILLUSION_STUDIO_HOME``).
+
+    Raises :class:`SettingsError` with a one-line message for a missing data dir, an unreadable
+    or invalid TOML file, or an invalid value.
+    """
+    raw_home = data_dir if data_dir is not None else os.environ.get(HOME_ENV)
+    if not raw_home:
+        raise SettingsError(f"no data dir: pass --data-dir DIR or set {HOME_ENV}")
+    home = Path(raw_home).expanduser()
+    if must_exist and not home.is_dir():
+        raise SettingsError(f"data dir {home} does not exist; run `illusion-studio --data-dir {home} init`")
+    values: dict[str, Any] = {}
+    toml_file = home / SETTINGS_FILE
+    if toml_file.is_file():
+        try:
+            values = tomllib.loads(toml_file.read_text(encoding="utf-8"))
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise SettingsError(f"{toml_file}: not valid TOML: {exc}") from None
+    values.update(overrides)
+    values["home"] = home
+    try:
+        return Settings(**values)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        where = ".".join(str(p) for p in err["loc"]) or "settings"
+        source = toml_file if toml_file.is_file() else "environment"
+        raise SettingsError(f"{source}: {where}: {err['msg']}") from None
