@@ -73,8 +73,8 @@ def test_api_errors_are_json(client, tokens) -> None:  # type: ignore[no-untyped
 
 def test_annotators_see_only_their_own_jobs(client, runtime, tokens) -> None:  # type: ignore[no-untyped-def]
     with transaction(runtime.sessions) as s:
-        mine = job_service.create_job(s, "import_synthetic", {}, user_service.get_user(s, "annotator")).id
-        theirs = job_service.create_job(s, "import_synthetic", {}, user_service.get_user(s, "admin")).id
+        mine = job_service.create_job(s, "ingest", {}, user_service.get_user(s, "annotator")).id
+        theirs = job_service.create_job(s, "ingest", {}, user_service.get_user(s, "admin")).id
     def ids(role: str) -> set[int]:
         return {j["id"] for j in client.get("/api/v1/jobs", headers={"Authorization": f"Bearer {tokens[role]}"}).json["items"]}
     assert ids("annotator") == {mine} and ids("curator") == {mine, theirs}
@@ -86,7 +86,7 @@ def test_annotators_see_only_their_own_jobs(client, runtime, tokens) -> None:  #
 
 def test_retry_refuses_jobs_that_did_not_fail(client, runtime, tokens) -> None:  # type: ignore[no-untyped-def]
     with transaction(runtime.sessions) as s:
-        job_id = job_service.create_job(s, "import_synthetic", {}, None).id
+        job_id = job_service.create_job(s, "ingest", {}, None).id
     response = client.post(f"/api/v1/jobs/{job_id}/retry", headers={"Authorization": f"Bearer {tokens['curator']}"})
     assert response.status_code == 409 and "only failed or interrupted" in response.json["error"]
 

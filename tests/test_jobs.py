@@ -17,6 +17,7 @@ from sqlalchemy import func, select
 from dataset.db import migrate, transaction
 from dataset.models import Frame, Job, JobState
 from dataset.services import jobs as job_service
+from dataset.services.ingest import ingest_params
 from dataset.synthetic import write_synthetic_dataset
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime
@@ -76,7 +77,7 @@ def start_worker(queue_settings: Settings) -> Iterator[Callable[[], subprocess.P
 
 def submit_import(rt: Runtime, path: Path) -> int:
     with transaction(rt.sessions) as s:
-        return rt.queue.submit(s, "import_synthetic", {"path": str(path)}, None).id
+        return rt.queue.submit(s, "ingest", ingest_params(str(path), fps=None, dedup_hamming=None), None).id
 
 
 def wait_for(rt: Runtime, job_id: int, predicate: Callable[[Job], bool], timeout: float = 90) -> Job:
@@ -102,7 +103,7 @@ def test_worker_runs_an_import_job(rt: Runtime, start_worker, tmp_path: Path) ->
     job = wait_for(rt, job_id, lambda j: j.state.finished)
     assert job.state == JobState.succeeded, job.error
     assert job.progress == 1.0 and job.attempts == 1
-    assert job.result == {"video_id": job.result["video_id"], "frames": 6, "new_frames": 6}
+    assert job.result == {"video_id": job.result["video_id"], "frames": 6, "new_frames": 6, "dropped_duplicates": 0}
     assert "frame 5" in job.log
     assert frame_count(rt) == 6
 
@@ -158,19 +159,19 @@ def test_two_workers_share_one_backlog(rt: Runtime, start_worker, tmp_path: Path
 
 def test_a_failing_job_records_a_readable_reason(runtime: Runtime, tmp_path: Path) -> None:
     with transaction(runtime.sessions) as s:
-        job_id = job_service.create_job(s, "import_synthetic", {"path": str(tmp_path / "nowhere")}, None).id
+        job_id = job_service.create_job(s, "ingest", ingest_params(str(tmp_path / "nowhere")), None).id
     state = job_service.execute_job(job_id, HANDLERS, runtime.sessions, runtime.media, runtime.settings)
     assert state == JobState.failed
     with runtime.sessions() as s:
         job = s.get(Job, job_id)
-        assert job.error.startswith("InvalidInput:") and "not a synthetic video" in job.error
+        assert job.error.startswith("IngestError:") and "no such file" in job.error
         assert "Traceback" in job.log
 
 
 def test_redelivered_job_runs_once(runtime: Runtime, tmp_path: Path) -> None:
     [video] = write_synthetic_dataset(tmp_path / "synth", videos=1, seed=1, n_frames=2, width=96, height=64)
     with transaction(runtime.sessions) as s:
-        job_id = job_service.create_job(s, "import_synthetic", {"path": str(video)}, None).id
+        job_id = job_service.create_job(s, "ingest", ingest_params(str(video)), None).id
     args = (HANDLERS, runtime.sessions, runtime.media, runtime.settings)
     assert job_service.execute_job(job_id, *args) == JobState.succeeded
     assert job_service.execute_job(job_id, *args) == JobState.succeeded  # a duplicate delivery is a no-op
@@ -182,10 +183,10 @@ def test_reaper_marks_jobs_of_dead_workers(runtime: Runtime) -> None:
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
     with transaction(runtime.sessions) as s:
-        job = job_service.create_job(s, "import_synthetic", {}, None)
+        job = job_service.create_job(s, "ingest", {}, None)
         job.state, job.worker = JobState.running, f"{job_service.worker_id().rpartition(':')[0]}:{dead.pid}"
         job.heartbeat_at = job.created_at
-        alive = job_service.create_job(s, "import_synthetic", {}, None)
+        alive = job_service.create_job(s, "ingest", {}, None)
         alive.state, alive.worker = JobState.running, job_service.worker_id()
         alive.heartbeat_at = alive.created_at
     with transaction(runtime.sessions) as s:

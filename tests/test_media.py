@@ -9,7 +9,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from dataset.media import MediaKeyError, MediaStore, atomic_write_bytes
+from dataset.atomic import atomic_write_bytes
+from dataset.media import MediaKeyError, MediaStore
 
 
 def test_put_is_content_addressed_and_idempotent(tmp_path: Path) -> None:

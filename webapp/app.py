@@ -10,7 +10,7 @@ from flask import Flask, g, render_template
 from flask_wtf.csrf import CSRFError
 from werkzeug.exceptions import HTTPException
 
-from dataset.media import atomic_write_bytes
+from dataset.atomic import atomic_write_bytes
 from dataset.services.errors import ServiceError
 from webapp.auth import init_auth, is_api_request, json_error
 from webapp.runtime import Runtime
@@ -65,8 +65,7 @@ def _stored_secret(home: Path) -> str:
     """A per-workspace secret key, created on first use, so sessions survive restarts."""
     path = home / "secret_key"
     if not path.exists():
-        atomic_write_bytes(path, secrets.token_hex(32).encode())
-        path.chmod(0o600)
+        atomic_write_bytes(path, secrets.token_hex(32).encode(), mode=0o600)
     return path.read_text().strip()
 
 

@@ -19,11 +19,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from dataset.atomic import atomic_write_bytes
 from dataset.synthetic.records import RegionPair, SyntheticFrame, SyntheticVideo
 from dataset.synthetic.render import render_video
 
 FORMAT = "illusion-studio/synthetic-v1"
-_FILE_MODE = 0o644
 _MAPS = ("disparity", "mono_disparity", "stereo_disparity")
 _FILES = {
     "video.mp4": "left frames at fps, MPEG-4 Part 2 ('mp4v'), lossy; for ingest",
@@ -42,20 +42,6 @@ _FILES = {
     "frames/{index:06d}/support_{pair:02d}.png": "support mask (wall band around the illusion) "
                                                  "of pair `pair`, 8-bit 0/255",
 }
-
-
-def _atomic_write(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` so that readers see the old file or the whole new one."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        # mkstemp creates 0600 files; dataset files are meant to be shared.
-        os.chmod(tmp, _FILE_MODE)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def _png(image: np.ndarray) -> bytes:
@@ -84,7 +70,7 @@ def _write_mp4(path: Path, frames: list[np.ndarray], fps: float) -> None:
         for frame in frames:
             writer.write(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
         writer.release()
-        os.chmod(tmp, _FILE_MODE)
+        os.chmod(tmp, 0o644)  # like every other dataset file (mkstemp makes 0600)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -99,14 +85,14 @@ def write_video(video: SyntheticVideo, out_dir: Path) -> Path:
     for frame in video.frames:
         folder = root / "frames" / f"{frame.index:06d}"
         folder.mkdir(exist_ok=True)
-        _atomic_write(folder / "left.png", _png(cv2.cvtColor(frame.left, cv2.COLOR_RGB2BGR)))
-        _atomic_write(folder / "right.png", _png(cv2.cvtColor(frame.right, cv2.COLOR_RGB2BGR)))
+        atomic_write_bytes(folder / "left.png", _png(cv2.cvtColor(frame.left, cv2.COLOR_RGB2BGR)))
+        atomic_write_bytes(folder / "right.png", _png(cv2.cvtColor(frame.right, cv2.COLOR_RGB2BGR)))
         for name in _MAPS:
-            _atomic_write(folder / f"{name}.npy", _npy(getattr(frame, name).astype(np.float32)))
+            atomic_write_bytes(folder / f"{name}.npy", _npy(getattr(frame, name).astype(np.float32)))
         for region in frame.regions:
             for name in ("illusion", "support"):
                 mask = getattr(region, name).astype(np.uint8) * 255
-                _atomic_write(folder / f"{name}_{region.pair:02d}.png", _png(mask))
+                atomic_write_bytes(folder / f"{name}_{region.pair:02d}.png", _png(mask))
     scene = {
         "format": FORMAT,
         "name": video.name,
@@ -124,7 +110,7 @@ def write_video(video: SyntheticVideo, out_dir: Path) -> Path:
         "frames": [{"index": f.index, "time_s": f.time_s} for f in video.frames],
         "files": _FILES,
     }
-    _atomic_write(root / "scene.json", (json.dumps(scene, indent=2) + "\n").encode())
+    atomic_write_bytes(root / "scene.json", (json.dumps(scene, indent=2) + "\n").encode())
     return root
 
 

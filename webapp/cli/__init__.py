@@ -6,6 +6,8 @@ from pathlib import Path
 
 import click
 
+from webapp.cli.bench import bench
+from webapp.cli.geometry import geometry
 from webapp.cli.jobs import jobs, worker
 from webapp.cli.state import CliState
 from webapp.cli.users import users
@@ -25,5 +27,5 @@ def main(ctx: click.Context, data_dir: Path | None) -> None:
     ctx.obj = CliState(data_dir)
 
 
-for command in (init, serve, worker, demo, synth, users, jobs):
+for command in (init, serve, worker, demo, synth, users, jobs, geometry, bench):
     main.add_command(command)

@@ -14,6 +14,7 @@ from dataset.db import migrate, transaction
 from dataset.models import Role, User, Video
 from dataset.services import jobs as job_service
 from dataset.services import users as user_service
+from dataset.services.ingest import ingest_params
 from webapp.cli.state import CliState, pass_state
 from webapp.settings import HOME_ENV, Settings, SettingsError, load_settings
 
@@ -132,7 +133,7 @@ def demo(state: CliState, no_serve: bool, videos: int, host: str | None, port: i
             logins.append((role.value, password))
         admin = s.scalar(select(User).where(User.name == Role.admin.value))
         imported = set(s.scalars(select(Video.original_path)))
-        jobs = [rt.queue.submit(s, "import_synthetic", {"path": str(p)}, admin)
+        jobs = [rt.queue.submit(s, "ingest", ingest_params(str(p), user_id=admin.id), admin)
                 for p in video_dirs if str(p) not in imported]
     job_ids = [j.id for j in jobs]
 

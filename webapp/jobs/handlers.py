@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from dataset.services.jobs import Handler
-from dataset.services.synthetic_import import import_synthetic_video
+from dataset.services.ingest import ingest_video
 
 HANDLERS: dict[str, Handler] = {
-    "import_synthetic": import_synthetic_video,
+    "ingest": ingest_video,
 }

@@ -1,0 +1,61 @@
+"""The geometry core: pure numpy/OpenCV functions for plane fitting, rectification,
+right-view synthesis and depth reprojection (no Flask, DB or torch imports)."""
+
+from dataset.geometry.calibration import RigCalibration, load_calibration, parse_calibration, save_calibration
+from dataset.geometry.camera import backproject, depth_to_disparity, disparity_to_depth
+from dataset.geometry.errors import (
+    CalibrationError,
+    DegenerateSupportError,
+    GeometryError,
+    InpaintError,
+    InputError,
+    ScaleSearchError,
+)
+from dataset.geometry.filters import guided_filter
+from dataset.geometry.inpaint import INPAINT_METHODS, InpaintMethod, inpaint_holes
+from dataset.geometry.plane import PlaneFit, fit_plane_ransac
+from dataset.geometry.rectify import (
+    MaskPair,
+    PairReport,
+    Rectified,
+    RegionMasks,
+    UnreliableSupportError,
+    rectify_disparity,
+    ring_mask,
+)
+from dataset.geometry.reproject import reproject_depth
+from dataset.geometry.right_view import RightView, forward_warp, search_disparity_scale, synthesize_right_view
+
+__all__ = [
+    "INPAINT_METHODS",
+    "CalibrationError",
+    "DegenerateSupportError",
+    "GeometryError",
+    "InpaintError",
+    "InpaintMethod",
+    "InputError",
+    "MaskPair",
+    "PairReport",
+    "PlaneFit",
+    "Rectified",
+    "RegionMasks",
+    "RigCalibration",
+    "RightView",
+    "ScaleSearchError",
+    "UnreliableSupportError",
+    "backproject",
+    "depth_to_disparity",
+    "disparity_to_depth",
+    "fit_plane_ransac",
+    "forward_warp",
+    "guided_filter",
+    "inpaint_holes",
+    "load_calibration",
+    "parse_calibration",
+    "rectify_disparity",
+    "reproject_depth",
+    "ring_mask",
+    "save_calibration",
+    "search_disparity_scale",
+    "synthesize_right_view",
+]

@@ -1,0 +1,32 @@
+"""``illusion-studio bench …``: speed benchmarks (fixed seeds, figures for the README)."""
+
+from __future__ import annotations
+
+import json
+
+import click
+
+from dataset.geometry.benchmark import run_geometry_benchmark
+
+# The budgets of DESIGN.md for this class of 2-core machine (ms).
+_BUDGETS_MS = {"plane_fit_1m_ms": 50, "right_view_1080p_ms": 120, "reproject_1080p_ms": 400}
+
+
+@click.group("bench")
+def bench() -> None:
+    """Speed benchmarks."""
+
+
+@bench.command("geometry")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@click.option("--repeats", type=click.IntRange(min=1), default=5, show_default=True, help="Timed runs per figure.")
+def geometry_benchmark(as_json: bool, repeats: int) -> None:
+    """Time plane fitting, right-view synthesis, inpainting and reprojection against references."""
+    results = run_geometry_benchmark(repeats=repeats)
+    if as_json:
+        click.echo(json.dumps(results))
+        return
+    for key, value in results.items():
+        budget = _BUDGETS_MS.get(key)
+        verdict = "" if budget is None else f"  (budget {budget} ms: {'ok' if value <= budget else 'OVER'})"
+        click.echo(f"{key:32} {value}{verdict}")
