@@ -8,8 +8,11 @@ key can never name a path outside the root.
 from __future__ import annotations
 
 import hashlib
+import os
 import re
+import tempfile
 from pathlib import Path
+from typing import BinaryIO
 
 from dataset.atomic import atomic_write_bytes
 
@@ -44,7 +47,34 @@ class MediaStore:
         return key
 
     def put_file(self, src: Path) -> str:
-        return self.put_bytes(Path(src).read_bytes(), Path(src).suffix)
+        with Path(src).open("rb") as fh:
+            return self.put_stream(fh, Path(src).suffix)
+
+    def put_stream(self, stream: BinaryIO, ext: str) -> str:
+        """Store a (possibly large) stream without holding it in memory; hashes while copying."""
+        ext = ext.lower().lstrip(".")
+        if not _EXT.match(ext):
+            raise MediaKeyError(f"bad file extension {ext!r}")
+        incoming = self.root / ".incoming"
+        incoming.mkdir(parents=True, exist_ok=True)
+        digest = hashlib.sha256()
+        fd, tmp = tempfile.mkstemp(dir=incoming, suffix=".part")
+        try:
+            with os.fdopen(fd, "wb") as out:
+                while chunk := stream.read(1 << 20):
+                    digest.update(chunk)
+                    out.write(chunk)
+                out.flush()
+                os.fsync(out.fileno())
+            hexdigest = digest.hexdigest()
+            key = f"{hexdigest[:2]}/{hexdigest[2:4]}/{hexdigest}.{ext}"
+            path = self.path(key)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            os.chmod(tmp, 0o644)
+            os.replace(tmp, path)  # same filesystem: atomic, and idempotent for equal content
+            return key
+        finally:
+            Path(tmp).unlink(missing_ok=True)
 
     def path(self, key: str) -> Path:
         """The file of ``key``; raises :class:`MediaKeyError` for anything not a store key."""

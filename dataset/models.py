@@ -158,7 +158,7 @@ class Video(Base):
     created_by_id: Mapped[int | None] = mapped_column(ForeignKey("users.id", ondelete="SET NULL"))
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
-    frames: Mapped[list[Frame]] = relationship(back_populates="video", order_by="Frame.index")
+    frames: Mapped[list[Frame]] = relationship(back_populates="video", order_by="Frame.index", passive_deletes=True)
 
 
 class Frame(Base):
@@ -179,8 +179,10 @@ class Frame(Base):
     state: Mapped[FrameState] = mapped_column(_enum(FrameState), default=FrameState.ingested)
     revision: Mapped[int] = mapped_column(default=1, doc="Bumped on every change; stale writes get 409.")
     assets: Mapped[dict[str, Any]] = mapped_column(
-        default=dict, doc="Media keys of side data imported with the frame (right view, disparities, masks)."
+        default=dict, doc="Media keys of side data: thumbnail, and ground truth imported with the frame."
     )
+    prefilter_job_id: Mapped[int | None] = mapped_column(
+        ForeignKey("jobs.id", ondelete="SET NULL"), doc="The prefilter job that has claimed this frame.")
     updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
 
     video: Mapped[Video] = relationship(back_populates="frames")

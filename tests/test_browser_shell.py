@@ -12,8 +12,8 @@ pytestmark = pytest.mark.browser
 
 NAV = {
     "annotator": ["dashboard", "frames", "jobs"],
-    "curator": ["dashboard", "frames", "jobs"],
-    "admin": ["dashboard", "frames", "jobs", "users"],
+    "curator": ["dashboard", "frames", "review", "ingest", "jobs"],
+    "admin": ["dashboard", "frames", "review", "ingest", "jobs", "users"],
 }
 
 

@@ -77,3 +77,14 @@ def test_served_to_logged_in_users_only(client, runtime, tokens) -> None:  # typ
         response = client.get(f"/media/{attack}", headers=auth, follow_redirects=True)
         assert response.status_code == 404, attack
         assert b"secret" not in response.data
+
+
+def test_put_stream_matches_put_bytes_and_leaves_no_partial_files(tmp_path: Path) -> None:
+    import io
+
+    store = MediaStore(tmp_path)
+    data = bytes(range(256)) * 9000  # several read chunks
+    key = store.put_stream(io.BytesIO(data), "mp4")
+    assert key == store.key_for(data, "mp4") and store.read_bytes(key) == data
+    assert store.put_stream(io.BytesIO(data), "mp4") == key
+    assert list((tmp_path / ".incoming").iterdir()) == []

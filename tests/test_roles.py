@@ -19,6 +19,8 @@ EXPECTED: dict[str, Role | None] = {
     "pages.dashboard": Role.annotator,
     "pages.frames": Role.annotator,
     "pages.jobs": Role.annotator,
+    "pages.review": Role.curator,
+    "pages.ingest": Role.curator,
     "pages.users": Role.admin,
     "pages.create_user": Role.admin,
     "media.serve": Role.annotator,
@@ -31,8 +33,13 @@ EXPECTED: dict[str, Role | None] = {
     "api.list_jobs": Role.annotator,
     "api.get_job": Role.annotator,
     "api.retry_job": Role.curator,
+    "api.review_frames": Role.curator,
+    "api.review_frame": Role.curator,
+    "api.review_bulk": Role.curator,
+    "api.list_videos": Role.annotator,
+    "api.upload_video": Role.curator,
 }
-SAMPLE_ARGS = {"job_id": "1", "key": "ab/cd/" + "ab" * 32 + ".png"}
+SAMPLE_ARGS = {"job_id": "1", "frame_id": "1", "key": "ab/cd/" + "ab" * 32 + ".png"}
 CALLERS = ["anonymous", *(r.value for r in Role)]
 
 

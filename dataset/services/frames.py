@@ -67,5 +67,5 @@ def frame_json(frame: Frame, prefilter_keep: bool | None) -> dict[str, Any]:
         "id": frame.id, "video_id": frame.video_id, "index": frame.index, "time_s": frame.time_s,
         "width": frame.width, "height": frame.height, "state": frame.state.value,
         "revision": frame.revision, "content_sha256": frame.content_sha256,
-        "image": frame.media_key, "prefilter_keep": prefilter_keep,
+        "image": frame.media_key, "thumb": frame.assets.get("thumb"), "prefilter_keep": prefilter_keep,
     }

@@ -14,7 +14,7 @@ from typing import Any
 
 import cv2
 import numpy as np
-from sqlalchemy import func, select
+from sqlalchemy import delete, func, select
 
 from dataset.db import transaction
 from dataset.ingest import DecodedFrame, IngestError, dhash, hamming, open_source
@@ -87,7 +87,7 @@ def ingest_video(ctx: JobContext) -> dict[str, Any]:
             ctx.progress((frame.index + 1) / max(info.frame_count, 1), f"frame {frame.index} ({frame.time_s:.2f} s)")
     except IngestError:
         with transaction(ctx.sessions) as s:
-            s.delete(s.get(Video, video_id))  # frames go with it (ON DELETE CASCADE)
+            s.execute(delete(Video).where(Video.id == video_id))  # frames go with it (ON DELETE CASCADE)
         raise
     if kept == 0:
         raise IngestError(f"{p['path']}: no frames could be decoded")

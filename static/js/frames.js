@@ -14,7 +14,7 @@ async function load() {
   const page = await api(`${grid.dataset.src}?${params}`);
   total.textContent = page.total ? `${offset + 1}–${offset + page.items.length} of ${page.total}` : "no frames yet";
   grid.replaceChildren(...page.items.map((f) => el("li", { dataset: { frameId: f.id } },
-    el("img", { src: grid.dataset.media + f.image, loading: "lazy", alt: `frame ${f.id}`, width: 240 }),
+    el("img", { src: grid.dataset.media + (f.thumb ?? f.image), loading: "lazy", alt: `frame ${f.id}`, width: 240 }),
     el("span", { className: "caption" }, `video ${f.video_id} · ${f.time_s.toFixed(1)} s · ${f.state}`),
   )));
   document.getElementById("prev-page").disabled = offset === 0;

@@ -30,6 +30,7 @@ def _q(name: str, typ: str = "integer", desc: str = "") -> dict[str, Any]:
 
 
 _JOB_ID = {"name": "job_id", "in": "path", "required": True, "schema": {"type": "integer"}}
+_FRAME_ID = {"name": "frame_id", "in": "path", "required": True, "schema": {"type": "integer"}}
 
 
 def openapi_document() -> dict[str, Any]:
@@ -48,6 +49,20 @@ def openapi_document() -> dict[str, Any]:
             "/frames": {"get": _op("List frames, ordered by video and time", "annotator", schema="FrameList",
                                    params=[_q("video_id"), _q("state", "string", "ingested, prefiltered, approved, …"),
                                            _q("limit", desc="1..10000, default 100"), _q("offset")])},
+            "/videos": {
+                "get": _op("List videos with their frame counts", "annotator", schema="VideoList"),
+                "post": _op("Upload a video (multipart: file, fps, source, illusion_type…); starts an ingest job",
+                            "curator", body="VideoUpload", ok="202", schema="Job"),
+            },
+            "/review/frames": {"get": _op("Frames to review with VLM answers and figures", "curator", schema="ReviewPage",
+                                          params=[_q("video_id"), _q("state", "string", "prefiltered (default), approved, rejected, all"),
+                                                  _q("keep", "string", "VLM verdict: true, false, null"),
+                                                  _q("question", desc="1..12, with answer"), _q("answer", "string", "yes, no, unknown"),
+                                                  _q("limit", desc="1..500, default 60"), _q("offset")])},
+            "/frames/{frame_id}/review": {"post": _op("Approve, reject (with a reason) or reset a frame; 409 if it changed",
+                                                      "curator", params=[_FRAME_ID], body="ReviewDecision", schema="ReviewItem")},
+            "/review/bulk": {"post": _op("Review many frames; each item succeeds or fails on its own", "curator",
+                                         body="BulkReview", schema="BulkResults")},
             "/stats/funnel": {"get": _op("Pipeline funnel counts", "annotator", schema="Funnel")},
             "/jobs": {"get": _op("List jobs (annotators: their own)", "annotator", schema="JobList",
                                  params=[_q("state", "string"), _q("limit", desc="1..500, default 50")])},
@@ -83,6 +98,23 @@ def openapi_document() -> dict[str, Any]:
                     "state": {"enum": ["queued", "running", "succeeded", "failed", "interrupted"]},
                     "progress": {"type": "number", "minimum": 0, "maximum": 1}, "error": {"type": ["string", "null"]},
                     "result": {}, "log": {"type": "string"}}},
+                "VideoList": {"type": "object", "properties": {"items": {"type": "array", "items": {"type": "object"}}}},
+                "VideoUpload": {"type": "object", "required": ["file"], "properties": {
+                    "file": {"type": "string", "format": "binary"}, "fps": {"type": "number"},
+                    "source": {"enum": ["web", "generated", "real_capture"]},
+                    "illusion_type": {"type": "array", "items": {"enum": ["inpainting", "picture", "replay", "holography", "mirror"]}}}},
+                "ReviewDecision": {"type": "object", "required": ["decision"], "properties": {
+                    "decision": {"enum": ["approve", "reject", "reset"]}, "reason": {"type": "string", "maxLength": 256},
+                    "revision": {"type": "integer", "description": "the frame revision the curator saw; stale → 409"}}},
+                "ReviewItem": {"allOf": [{"$ref": "#/components/schemas/Frame"}, {"type": "object", "properties": {
+                    "thumb": {"type": "string"}, "prefilter": {"type": ["object", "null"]}, "last_review": {"type": ["object", "null"]}}}]},
+                "ReviewPage": {"type": "object", "properties": {"items": {"type": "array", "items": {"$ref": "#/components/schemas/ReviewItem"}},
+                                                                "total": {"type": "integer"}, "reasons": {"type": "array"},
+                                                                "questions": {"type": "array"}}},
+                "BulkReview": {"type": "object", "required": ["decision", "items"], "properties": {
+                    "decision": {"enum": ["approve", "reject", "reset"]}, "reason": {"type": "string"},
+                    "items": {"type": "array", "items": {"type": "object", "properties": {"id": {"type": "integer"}, "revision": {"type": "integer"}}}}}},
+                "BulkResults": {"type": "object", "properties": {"results": {"type": "array", "items": {"type": "object"}}}},
                 "JobList": {"type": "object", "properties": {"items": {"type": "array", "items": {"$ref": "#/components/schemas/Job"}}}},
             },
         },

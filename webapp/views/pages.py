@@ -9,10 +9,13 @@ from flask.typing import ResponseReturnValue
 from flask_login import current_user, login_user, logout_user
 from sqlalchemy import select
 
-from dataset.models import Role, User
+from dataset.ingest.sources import VIDEO_EXTENSIONS
+from dataset.models import IllusionType, Role, SourceKind, User, Video
 from dataset.services import users as user_service
 from dataset.services.errors import ServiceError
 from dataset.services.frames import FUNNEL_STAGES, funnel_counts
+from dataset.services.review import QUESTION_LABELS, REJECT_REASONS
+from webapp.app import runtime
 from webapp.auth import SessionUser, public, requires
 from webapp.forms import CreateUserForm, LoginForm
 
@@ -73,6 +76,24 @@ def frames() -> ResponseReturnValue:
 @requires(Role.annotator)
 def jobs() -> ResponseReturnValue:
     return render_template("jobs.html")
+
+
+@pages.get("/review")
+@requires(Role.curator)
+def review() -> ResponseReturnValue:
+    """The curators' review grid (per video with ?video_id=N)."""
+    video_id = request.args.get("video_id", type=int)
+    video = g.db.get(Video, video_id) if video_id else None
+    return render_template("review.html", video=video, reasons=REJECT_REASONS, questions=QUESTION_LABELS)
+
+
+@pages.get("/ingest")
+@requires(Role.curator)
+def ingest() -> ResponseReturnValue:
+    """Upload videos; each becomes an ingest job."""
+    return render_template("ingest.html", sources=list(SourceKind), illusion_types=list(IllusionType),
+                           max_upload_mb=runtime().settings.max_upload_mb,
+                           extensions=sorted(VIDEO_EXTENSIONS))
 
 
 @pages.get("/admin/users")

@@ -2,7 +2,7 @@
 
 Revision ID: 0001
 Revises: 
-Create Date: 2026-11-21 23:26:36.033534
+Create Date: 2026-11-21 23:50:03.932377
 """
 
 from alembic import op
@@ -108,7 +108,9 @@ def upgrade() -> None:
     sa.Column('state', sa.Enum('ingested', 'prefiltered', 'approved', 'rejected', 'annotated', 'generated', 'accepted', 'deleted', name='framestate', native_enum=False, create_constraint=True, length=32), nullable=False),
     sa.Column('revision', sa.Integer(), nullable=False),
     sa.Column('assets', sa.JSON(), nullable=False),
+    sa.Column('prefilter_job_id', sa.Integer(), nullable=True),
     sa.Column('updated_at', sa.DateTime(), nullable=False),
+    sa.ForeignKeyConstraint(['prefilter_job_id'], ['jobs.id'], name=op.f('fk_frames_prefilter_job_id_jobs'), ondelete='SET NULL'),
     sa.ForeignKeyConstraint(['video_id'], ['videos.id'], name=op.f('fk_frames_video_id_videos'), ondelete='CASCADE'),
     sa.PrimaryKeyConstraint('id', name=op.f('pk_frames')),
     sa.UniqueConstraint('video_id', 'index', name='uq_frames_video_index')

@@ -1,0 +1,161 @@
+"""Curator review: approve or reject prefiltered frames, with reasons, optimistic locking and an audit trail."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from sqlalchemy import Select, and_, func, select
+from sqlalchemy.orm import Session
+
+from dataset.models import Frame, FrameState, PrefilterResult, Review, ReviewDecision, User, utcnow
+from dataset.services import audit
+from dataset.services.errors import Conflict, InvalidInput, NotFound, ServiceError
+from dataset.services.frames import frame_json
+
+REJECT_REASONS = ("blurry", "occluded", "no illusion", "watermark", "duplicate")
+# Short names of the prefilter prompt's 12 questions, in order, for the review grid.
+QUESTION_LABELS = ("flat art", "perspective illusion", "illusion graffiti", "transparent/reflective",
+                   "3D on a screen", "looks 3D", "heavy watermark", "corner watermark", "blurry",
+                   "hands cover art", "software UI", "only artist sharp")
+REVIEWABLE = (FrameState.prefiltered, FrameState.approved, FrameState.rejected)
+# "reset" undoes a decision: the frame goes back to the curators' queue.
+DECISIONS = ("approve", "reject", "reset")
+_TARGET = {"approve": FrameState.approved, "reject": FrameState.rejected, "reset": FrameState.prefiltered}
+
+
+def review_frame(session: Session, frame_id: int, user: User | Any, decision: str, reason: str = "",
+                 revision: int | None = None) -> Frame:
+    """Apply one curator decision; ``revision`` (what the curator saw) guards against stale pages.
+
+    Raises InvalidInput (bad decision or reason), NotFound, or Conflict (the frame changed since
+    the curator loaded it, or it has moved on past review) — and then changes nothing.
+    """
+    if decision not in DECISIONS:
+        raise InvalidInput(f"decision must be one of {', '.join(DECISIONS)}")
+    reason = (reason or "").strip()
+    if decision == "reject" and not reason:
+        raise InvalidInput(f"a rejection needs a reason, e.g. {', '.join(REJECT_REASONS)}")
+    if len(reason) > 256:
+        raise InvalidInput("reason is longer than 256 characters")
+    frame = session.get(Frame, frame_id, with_for_update=True)
+    if frame is None:
+        raise NotFound(f"no frame {frame_id}")
+    if revision is not None and revision != frame.revision:
+        raise Conflict(f"frame {frame_id} changed since you loaded it (revision {revision}, now {frame.revision}); "
+                       "reload to see its current state")
+    if frame.state not in REVIEWABLE:
+        raise Conflict(f"frame {frame_id} is {frame.state.value}; only prefiltered, approved or rejected frames "
+                       "can be reviewed")
+    before = frame.state
+    frame.state = _TARGET[decision]
+    frame.revision += 1
+    frame.updated_at = utcnow()
+    if decision != "reset":
+        session.add(Review(frame_id=frame.id, user_id=user.id, decision=ReviewDecision(decision), reason=reason))
+    audit.record(session, user.id, f"review.{decision}", "frame", frame.id, reason=reason,
+                 before=before.value, after=frame.state.value)
+    session.flush()
+    return frame
+
+
+def review_many(session: Session, items: Sequence[dict[str, Any]], user: User | Any, decision: str,
+                reason: str = "") -> list[dict[str, Any]]:
+    """Bulk review; each item ``{"id", "revision"}`` succeeds or fails on its own (a savepoint each)."""
+    if not items or len(items) > 1000:
+        raise InvalidInput("items must hold 1..1000 frames")
+    results = []
+    for item in items:
+        try:
+            with session.begin_nested():
+                frame = review_frame(session, int(item["id"]), user, decision, reason, item.get("revision"))
+            results.append({"id": frame.id, "status": 200, "frame": current_item(session, frame.id)})
+        except ServiceError as exc:
+            results.append({"id": item.get("id"), "status": exc.status, "error": str(exc)})
+        except (KeyError, TypeError, ValueError):
+            results.append({"id": item.get("id") if isinstance(item, dict) else None, "status": 400,
+                            "error": "each item needs an integer id (and optionally revision)"})
+    return results
+
+
+def review_query(*, video_id: int | None, states: Sequence[FrameState], keep: str | None,
+                 question: int | None = None, answer: str | None = None) -> Select[Any]:
+    """Frames with their newest prefilter result, filtered by state, verdict and one question's answer."""
+    latest = (select(PrefilterResult.frame_id, func.max(PrefilterResult.id).label("rid"))
+              .group_by(PrefilterResult.frame_id).subquery())
+    query = (select(Frame, PrefilterResult)
+             .outerjoin(latest, latest.c.frame_id == Frame.id)
+             .outerjoin(PrefilterResult, PrefilterResult.id == latest.c.rid)
+             .where(Frame.state.in_(states)))
+    if video_id is not None:
+        query = query.where(Frame.video_id == video_id)
+    if keep is not None:
+        values = {"true": True, "false": False}
+        query = query.where(PrefilterResult.keep.is_(None) if keep == "null" else PrefilterResult.keep == values[keep])
+    if question is not None:
+        value = PrefilterResult.answers[question - 1].as_boolean()  # a JSON path on SQLite and PostgreSQL alike
+        query = query.where(value.is_(None) if answer == "unknown" else value == (answer == "yes"))
+    return query.order_by(Frame.video_id, Frame.index)
+
+
+def list_review_items(session: Session, *, video_id: int | None = None, state: str = "prefiltered",
+                      keep: str | None = None, question: int | None = None, answer: str | None = None,
+                      limit: int = 60, offset: int = 0) -> tuple[list[dict[str, Any]], int]:
+    """A page of frames for the review grid, with VLM answers, measured figures and the last decision."""
+    states = REVIEWABLE if state == "all" else (_parse_state(state),)
+    if keep not in (None, "true", "false", "null"):
+        raise InvalidInput("keep must be true, false or null")
+    if (question is None) != (answer is None):
+        raise InvalidInput("question and answer go together")
+    if question is not None and not 1 <= question <= 12:
+        raise InvalidInput("question must be 1..12")
+    if answer not in (None, "yes", "no", "unknown"):
+        raise InvalidInput("answer must be yes, no or unknown")
+    if not 1 <= limit <= 500 or offset < 0:
+        raise InvalidInput("limit must be 1..500 and offset ≥ 0")
+    query = review_query(video_id=video_id, states=states, keep=keep, question=question, answer=answer)
+    total = session.scalar(select(func.count()).select_from(query.order_by(None).subquery())) or 0
+    page = session.execute(query.limit(limit).offset(offset)).all()
+    last = _last_reviews(session, [f.id for f, _ in page])
+    return [review_item(session, f, pr, last.get(f.id)) for f, pr in page], total
+
+
+def _parse_state(value: str) -> FrameState:
+    try:
+        state = FrameState(value)
+    except ValueError:
+        state = None
+    if state not in REVIEWABLE:
+        raise InvalidInput("state must be prefiltered, approved, rejected or all")
+    return state
+
+
+def _last_reviews(session: Session, frame_ids: list[int]) -> dict[int, dict[str, Any]]:
+    if not frame_ids:
+        return {}
+    latest = select(Review.frame_id, func.max(Review.id).label("rid")).where(
+        Review.frame_id.in_(frame_ids)).group_by(Review.frame_id).subquery()
+    rows = session.execute(select(Review, User.name).join(latest, and_(latest.c.rid == Review.id))
+                           .outerjoin(User, User.id == Review.user_id)).all()
+    return {r.frame_id: {"decision": r.decision.value, "reason": r.reason, "user": name,
+                         "at": r.created_at.isoformat() + "Z"} for r, name in rows}
+
+
+def current_item(session: Session, frame_id: int) -> dict[str, Any] | None:
+    frame = session.get(Frame, frame_id)
+    return None if frame is None else review_item(session, frame, last_review=_last_reviews(session, [frame_id]).get(frame_id))
+
+
+def review_item(session: Session, frame: Frame, result: PrefilterResult | None = None,
+                last_review: dict[str, Any] | None = None) -> dict[str, Any]:
+    if result is None:
+        result = session.scalar(select(PrefilterResult).where(PrefilterResult.frame_id == frame.id)
+                                .order_by(PrefilterResult.id.desc()).limit(1))
+    item = frame_json(frame, result.keep if result else None)
+    item["thumb"] = frame.assets.get("thumb", frame.media_key)
+    item["prefilter"] = None if result is None else {
+        "backend": result.backend, "model_id": result.model_id, "prompt_version": result.prompt_version,
+        "answers": result.answers, "parsed": result.parsed, "keep": result.keep, "metrics": result.metrics,
+        "raw": result.raw_answer}
+    item["last_review"] = last_review
+    return item

@@ -1,0 +1,69 @@
+// Uploads videos one by one with a byte progress bar (XHR: fetch has no upload progress),
+// then follows each ingest job's progress until it finishes.
+import { api, el, poll } from "./api.js";
+
+const form = document.getElementById("upload");
+const list = document.getElementById("uploads");
+const csrf = document.querySelector('meta[name="csrf-token"]').content;
+
+function upload(file, fields, onProgress) {
+  return new Promise((resolve, reject) => {
+    const body = new FormData();
+    body.append("file", file);
+    for (const [key, value] of fields) body.append(key, value);
+    const xhr = new XMLHttpRequest();
+    xhr.open("POST", form.dataset.src);
+    xhr.setRequestHeader("X-CSRFToken", csrf);
+    xhr.setRequestHeader("Accept", "application/json");
+    xhr.upload.onprogress = (e) => e.lengthComputable && onProgress(e.loaded / e.total);
+    xhr.onload = () => {
+      const data = JSON.parse(xhr.responseText || "{}");
+      xhr.status < 300 ? resolve(data) : reject(new Error(data.error ?? `${xhr.status} ${xhr.statusText}`));
+    };
+    xhr.onerror = () => reject(new Error("network error during upload"));
+    xhr.send(body);
+  });
+}
+
+function follow(job, row) {
+  const bar = row.querySelector("progress");
+  const label = row.querySelector(".status");
+  const stop = poll(async () => {
+    const current = await api(`${form.dataset.jobs}/${job.id}`);
+    bar.value = current.progress;
+    label.textContent = `ingest job ${current.id}: ${current.state}`;
+    if (current.state === "succeeded") {
+      label.textContent += ` — ${current.result.frames} frames (${current.result.dropped_duplicates} near-duplicates dropped)`;
+      stop();
+    } else if (["failed", "interrupted"].includes(current.state)) {
+      label.textContent += ` — ${current.error}`;
+      row.classList.add("failed");
+      stop();
+    }
+  }, 1000);
+}
+
+form.addEventListener("submit", async (event) => {
+  event.preventDefault();
+  const files = [...form.elements.file.files];
+  const fields = [...new FormData(form)].filter(([key]) => key !== "file");
+  for (const file of files) {
+    const row = el("li", {}, el("span", { className: "name" }, file.name), el("progress", { max: 1, value: 0 }),
+      el("span", { className: "status" }, "uploading…"));
+    list.prepend(row);
+    if (file.size > Number(form.dataset.maxBytes)) {
+      row.querySelector(".status").textContent = "too large for this server's upload limit";
+      row.classList.add("failed");
+      continue;
+    }
+    try {
+      const job = await upload(file, fields, (f) => { row.querySelector("progress").value = f; });
+      row.querySelector("progress").value = 0;
+      follow(job, row);
+    } catch (err) {
+      row.querySelector(".status").textContent = err.message;
+      row.classList.add("failed");
+    }
+  }
+  form.reset();
+});

@@ -1,0 +1,99 @@
+"""Core API: the caller, users, frames, funnel counts and jobs."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from flask import g, request
+from flask.typing import ResponseReturnValue
+from flask_login import current_user
+from sqlalchemy import select
+
+from dataset.models import Job, Role, User
+from dataset.services import jobs as job_service
+from dataset.services import users as user_service
+from dataset.services.errors import NotFound
+from dataset.services.frames import funnel_counts, list_frames, parse_state
+from webapp.api.openapi import openapi_document
+from webapp.app import runtime
+from webapp.api.blueprint import api, int_arg, json_body
+from webapp.auth import requires
+
+
+@api.get("/openapi.json")
+@requires(Role.annotator)
+def openapi() -> ResponseReturnValue:
+    return openapi_document()
+
+
+@api.get("/me")
+@requires(Role.annotator)
+def me() -> ResponseReturnValue:
+    return {"id": current_user.id, "name": current_user.name, "role": current_user.role.value}
+
+
+@api.get("/users")
+@requires(Role.admin)
+def list_users() -> ResponseReturnValue:
+    return {"items": [user_service.user_json(u) for u in g.db.scalars(select(User).order_by(User.id))]}
+
+
+@api.post("/users")
+@requires(Role.admin)
+def create_user() -> ResponseReturnValue:
+    body = json_body()
+    user = user_service.create_user(g.db, str(body.get("name", "")), str(body.get("role", "")),
+                                    str(body.get("password", "")))
+    g.db.commit()
+    return user_service.user_json(user), 201
+
+
+@api.get("/frames")
+@requires(Role.annotator)
+def frames() -> ResponseReturnValue:
+    state = request.args.get("state")
+    items, total = list_frames(
+        g.db, video_id=int_arg("video_id"), state=parse_state(state) if state else None,
+        limit=int_arg("limit", 100) or 100, offset=int_arg("offset", 0) or 0,
+    )
+    return {"items": items, "total": total}
+
+
+@api.get("/stats/funnel")
+@requires(Role.annotator)
+def funnel() -> ResponseReturnValue:
+    return funnel_counts(g.db)
+
+
+def _visible_jobs() -> Any:
+    """Curators and admins see every job; annotators see the jobs they launched."""
+    query = select(Job).order_by(Job.id.desc())
+    if not current_user.allows(Role.curator):
+        query = query.where(Job.created_by_id == current_user.id)
+    return query
+
+
+@api.get("/jobs")
+@requires(Role.annotator)
+def list_jobs() -> ResponseReturnValue:
+    query = _visible_jobs()
+    if state := request.args.get("state"):
+        query = query.where(Job.state == state)
+    limit = min(max(int_arg("limit", 50) or 50, 1), 500)
+    return {"items": [job_service.job_json(j) for j in g.db.scalars(query.limit(limit))]}
+
+
+@api.get("/jobs/<int:job_id>")
+@requires(Role.annotator)
+def get_job(job_id: int) -> ResponseReturnValue:
+    job = g.db.scalar(_visible_jobs().where(Job.id == job_id))
+    if job is None:
+        raise NotFound(f"no job {job_id}")
+    return job_service.job_json(job, with_log=True)
+
+
+@api.post("/jobs/<int:job_id>/retry")
+@requires(Role.curator)
+def retry_job(job_id: int) -> ResponseReturnValue:
+    job = runtime().queue.retry(job_id)
+    return job_service.job_json(job), 202

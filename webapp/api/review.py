@@ -1,0 +1,52 @@
+"""Curator review API: the review grid's data, single and bulk decisions."""
+
+from __future__ import annotations
+
+from flask import g, request
+from flask.typing import ResponseReturnValue
+from flask_login import current_user
+
+from dataset.models import Role
+from dataset.services import review as review_service
+from dataset.services.errors import Conflict
+from webapp.api.blueprint import api, int_arg, json_body
+from webapp.auth import requires
+
+
+@api.get("/review/frames")
+@requires(Role.curator)
+def review_frames() -> ResponseReturnValue:
+    items, total = review_service.list_review_items(
+        g.db, video_id=int_arg("video_id"), state=request.args.get("state", "prefiltered"),
+        keep=request.args.get("keep") or None, question=int_arg("question"), answer=request.args.get("answer") or None,
+        limit=int_arg("limit", 60) or 60, offset=int_arg("offset", 0) or 0)
+    return {"items": items, "total": total, "reasons": list(review_service.REJECT_REASONS),
+            "questions": list(review_service.QUESTION_LABELS)}
+
+
+@api.post("/frames/<int:frame_id>/review")
+@requires(Role.curator)
+def review_frame(frame_id: int) -> ResponseReturnValue:
+    body = json_body()
+    revision = body.get("revision")
+    try:
+        frame = review_service.review_frame(g.db, frame_id, current_user, str(body.get("decision", "")),
+                                            str(body.get("reason", "")), int(revision) if revision is not None else None)
+    except Conflict as exc:
+        g.db.rollback()
+        current = review_service.current_item(g.db, frame_id)
+        return {"error": str(exc), "status": 409, "frame": current}, 409
+    item = review_service.current_item(g.db, frame.id)
+    g.db.commit()
+    return item
+
+
+@api.post("/review/bulk")
+@requires(Role.curator)
+def review_bulk() -> ResponseReturnValue:
+    body = json_body()
+    items = body.get("items")
+    results = review_service.review_many(g.db, items if isinstance(items, list) else [], current_user,
+                                         str(body.get("decision", "")), str(body.get("reason", "")))
+    g.db.commit()
+    return {"results": results}

@@ -1,0 +1,57 @@
+"""Videos: list them, and upload new ones (each upload becomes an ingest job)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from flask import g, request
+from flask.typing import ResponseReturnValue
+from flask_login import current_user
+from sqlalchemy import func, select
+
+from dataset.ingest.sources import VIDEO_EXTENSIONS
+from dataset.models import Frame, Role, User, Video
+from dataset.services import jobs as job_service
+from dataset.services.errors import InvalidInput
+from dataset.services.ingest import DEFAULT_DEDUP_HAMMING, ingest_params
+from webapp.api.blueprint import api
+from webapp.app import runtime
+from webapp.auth import requires
+
+
+@api.get("/videos")
+@requires(Role.annotator)
+def list_videos() -> ResponseReturnValue:
+    counts = dict(g.db.execute(select(Frame.video_id, func.count()).group_by(Frame.video_id)).all())
+    videos = g.db.scalars(select(Video).order_by(Video.id.desc()))
+    return {"items": [{"id": v.id, "name": v.name, "source_kind": v.source_kind.value,
+                       "illusion_types": v.illusion_types, "fps": v.fps, "width": v.width, "height": v.height,
+                       "frames": counts.get(v.id, 0), "ingest": v.meta.get("ingest"),
+                       "created_at": v.created_at.isoformat() + "Z"} for v in videos]}
+
+
+@api.post("/videos")
+@requires(Role.curator)
+def upload_video() -> ResponseReturnValue:
+    """Multipart upload: ``file`` plus optional ``fps``, ``source``, ``illusion_type`` (repeatable)."""
+    upload = request.files.get("file")
+    if upload is None or not upload.filename:
+        raise InvalidInput("send the video as the multipart field 'file'")
+    name = Path(upload.filename).name
+    ext = Path(name).suffix.lower()
+    if ext not in VIDEO_EXTENSIONS:
+        raise InvalidInput(f"{name}: not a video file name (expected one of {', '.join(sorted(VIDEO_EXTENSIONS))})")
+    try:
+        fps = float(request.form.get("fps") or 2.0)
+    except ValueError:
+        raise InvalidInput("fps must be a number") from None
+    params = ingest_params("", fps=fps or None, source=request.form.get("source") or None,
+                           illusion_types=request.form.getlist("illusion_type"),
+                           dedup_hamming=DEFAULT_DEDUP_HAMMING, user_id=current_user.id, original_name=name)
+    rt = runtime()
+    key = rt.media.put_stream(upload.stream, ext)
+    params["path"] = str(rt.media.path(key))
+    user = g.db.get(User, current_user.id)
+    job = rt.queue.submit(g.db, "ingest", params, user)
+    g.db.commit()
+    return job_service.job_json(job), 202
