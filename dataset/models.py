@@ -200,7 +200,8 @@ class PrefilterResult(Base):
     answers: Mapped[list[Any]] = mapped_column(default=list, doc="12 entries: true, false or null (unknown).")
     parsed: Mapped[bool] = mapped_column(default=False)
     keep: Mapped[bool | None]
-    metrics: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    reason: Mapped[str] = mapped_column(Text, default="", doc="Why keep is what it is, naming the questions.")
+    metrics: Mapped[dict[str, Any]] = mapped_column(default=dict, doc="Measured figures, name → number.")
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -87,6 +88,8 @@ def test_demo_without_serving_builds_a_complete_workspace(tmp_path: Path) -> Non
     assert result.returncode == 0, result.stderr
     for role in ("annotator", "curator", "admin"):
         assert f"{role}-demo" in result.stdout
-    assert result.stdout.count(": succeeded") == 2
+    assert result.stdout.count(": succeeded") == 4  # an ingest and a prefilter job per video
+    frames = json.loads(cli("--data-dir", str(home), "frames", "list", "--json").stdout)
+    assert len(frames) == 24 and {f["state"] for f in frames} == {"prefiltered"}
     again = cli("--data-dir", str(home), "demo", "--no-serve", "--videos", "2")
-    assert again.returncode == 0 and "import job" not in again.stdout  # nothing to do twice
+    assert again.returncode == 0 and "succeeded" not in again.stdout  # nothing to do twice

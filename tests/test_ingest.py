@@ -36,7 +36,7 @@ def write_avi(path: Path, n: int, fps: float = 10, size: tuple[int, int] = (160,
 def run_ingest(rt: Runtime, path: Path, **kw: object) -> Job:
     with transaction(rt.sessions) as s:
         job_id = job_service.create_job(s, "ingest", ingest_params(str(path), **kw), None).id
-    job_service.execute_job(job_id, HANDLERS, rt.sessions, rt.media, rt.settings)
+    job_service.execute_job(job_id, HANDLERS, rt)
     with rt.sessions() as s:
         return s.get(Job, job_id)
 

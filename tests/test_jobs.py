@@ -2,93 +2,28 @@
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import sys
 import time
-import uuid
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 from sqlalchemy import func, select
 
-from dataset.db import migrate, transaction
+from dataset.db import transaction
 from dataset.models import Frame, Job, JobState
 from dataset.services import jobs as job_service
 from dataset.services.ingest import ingest_params
 from dataset.synthetic import write_synthetic_dataset
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime
-from webapp.settings import Settings
-from tests.conftest import TEST_REDIS_URL, make_settings
-
-ROOT = Path(__file__).resolve().parent.parent
-
-
-@pytest.fixture(params=["sqlite", "redis"])
-def queue_settings(request: pytest.FixtureRequest, tmp_path: Path) -> Settings:
-    home = tmp_path / "ws"
-    home.mkdir()
-    if request.param == "redis":
-        if not TEST_REDIS_URL:
-            pytest.skip("Redis queue tests need TEST_REDIS_URL (e.g. redis://127.0.0.1:6379/0)")
-        # A queue name of its own, so parallel or leftover runs never share a backlog.
-        (home / "illusion-studio.toml").write_text(
-            f'queue_url = "{TEST_REDIS_URL}"\nqueue_name = "test-{uuid.uuid4().hex[:8]}"\n')
-    settings = make_settings(home)
-    migrate(settings.database_url)
-    return settings
-
-
-@pytest.fixture
-def rt(queue_settings: Settings) -> Iterator[Runtime]:
-    runtime = Runtime(queue_settings)
-    yield runtime
-    if queue_settings.queue_url:
-        runtime.queue.huey.flush()
-    runtime.close()
-
-
-@pytest.fixture
-def start_worker(queue_settings: Settings) -> Iterator[Callable[[], subprocess.Popen[bytes]]]:
-    """Start real `illusion-studio worker` processes; all are stopped after the test."""
-    procs: list[subprocess.Popen[bytes]] = []
-
-    def start() -> subprocess.Popen[bytes]:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "webapp.cli", "--data-dir", str(queue_settings.home), "worker"],
-            cwd=ROOT, env={**os.environ, "PYTHONUNBUFFERED": "1"},
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        procs.append(proc)
-        return proc
-
-    yield start
-    for proc in procs:
-        if proc.poll() is None:
-            proc.terminate()
-    for proc in procs:
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-
+from tests.workers import extra_settings, queue_settings, rt, start_worker, wait_for  # noqa: F401  (fixtures)
 
 def submit_import(rt: Runtime, path: Path) -> int:
     with transaction(rt.sessions) as s:
         return rt.queue.submit(s, "ingest", ingest_params(str(path), fps=None, dedup_hamming=None), None).id
-
-
-def wait_for(rt: Runtime, job_id: int, predicate: Callable[[Job], bool], timeout: float = 90) -> Job:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        with rt.sessions() as s:
-            job = s.get(Job, job_id)
-            if predicate(job):
-                return job
-        time.sleep(0.01)
-    raise AssertionError(f"job {job_id} never reached the expected state; last: {job.state} {job.progress} {job.error}")
 
 
 def frame_count(rt: Runtime) -> int:
@@ -160,7 +95,7 @@ def test_two_workers_share_one_backlog(rt: Runtime, start_worker, tmp_path: Path
 def test_a_failing_job_records_a_readable_reason(runtime: Runtime, tmp_path: Path) -> None:
     with transaction(runtime.sessions) as s:
         job_id = job_service.create_job(s, "ingest", ingest_params(str(tmp_path / "nowhere")), None).id
-    state = job_service.execute_job(job_id, HANDLERS, runtime.sessions, runtime.media, runtime.settings)
+    state = job_service.execute_job(job_id, HANDLERS, runtime)
     assert state == JobState.failed
     with runtime.sessions() as s:
         job = s.get(Job, job_id)
@@ -172,7 +107,7 @@ def test_redelivered_job_runs_once(runtime: Runtime, tmp_path: Path) -> None:
     [video] = write_synthetic_dataset(tmp_path / "synth", videos=1, seed=1, n_frames=2, width=96, height=64)
     with transaction(runtime.sessions) as s:
         job_id = job_service.create_job(s, "ingest", ingest_params(str(video)), None).id
-    args = (HANDLERS, runtime.sessions, runtime.media, runtime.settings)
+    args = (HANDLERS, runtime)
     assert job_service.execute_job(job_id, *args) == JobState.succeeded
     assert job_service.execute_job(job_id, *args) == JobState.succeeded  # a duplicate delivery is a no-op
     with runtime.sessions() as s:

@@ -79,6 +79,7 @@ def test_bulk_review_succeeds_or_fails_per_item(sessions) -> None:  # type: igno
         results = review_service.review_many(s, [{"id": ids[0], "revision": 1}, {"id": ids[1], "revision": 7},
                                                  {"id": 9999}, {"nope": 1}], curator, "approve")
     assert [r["status"] for r in results] == [200, 409, 404, 400]
+    assert results[1]["frame"]["revision"] == 1 and "changed since you loaded it" in results[1]["error"]
     with sessions() as s:
         assert [s.get(Frame, i).state for i in ids[:2]] == [FrameState.approved, FrameState.prefiltered]
 

@@ -38,6 +38,7 @@ EXPECTED: dict[str, Role | None] = {
     "api.review_bulk": Role.curator,
     "api.list_videos": Role.annotator,
     "api.upload_video": Role.curator,
+    "api.start_prefilter": Role.curator,
 }
 SAMPLE_ARGS = {"job_id": "1", "frame_id": "1", "key": "ab/cd/" + "ab" * 32 + ".png"}
 CALLERS = ["anonymous", *(r.value for r in Role)]

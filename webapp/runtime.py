@@ -4,12 +4,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import Any
 
 from sqlalchemy import Engine
 from sqlalchemy.orm import Session, sessionmaker
 
 from dataset.db import make_engine, make_session_factory
 from dataset.media import MediaStore
+from dataset.models import Job, User
 from webapp.settings import Settings
 
 
@@ -30,6 +32,10 @@ class Runtime:
         from webapp.jobs.queue import JobQueue  # the queue pulls in every job handler: only on use
 
         return JobQueue(self)
+
+    def submit(self, session: Session, kind: str, params: dict[str, Any], user: User | None) -> Job:
+        """Queue a job (its row commits with ``session``); see :meth:`JobQueue.submit`."""
+        return self.queue.submit(session, kind, params, user)
 
     def close(self) -> None:
         self.engine.dispose()

@@ -21,6 +21,7 @@ from dataset.ingest import DecodedFrame, IngestError, dhash, hamming, open_sourc
 from dataset.models import Frame, IllusionType, SourceKind, Video
 from dataset.services.errors import InvalidInput
 from dataset.services.jobs import JobContext
+from dataset.services.prefilter import launch_prefilter
 
 THUMB_WIDTH = 320
 DEFAULT_FPS = 2.0  # the paper's sampling rate
@@ -29,7 +30,8 @@ DEFAULT_DEDUP_HAMMING = 4
 
 def ingest_params(path: str, *, fps: float | None = DEFAULT_FPS, source: str | None = None,
                   illusion_types: list[str] | None = None, dedup_hamming: int | None = DEFAULT_DEDUP_HAMMING,
-                  user_id: int | None = None, original_name: str | None = None) -> dict[str, Any]:
+                  user_id: int | None = None, original_name: str | None = None,
+                  prefilter: bool = False) -> dict[str, Any]:
     """Validated parameters of an ingest job (raises InvalidInput with a one-line reason)."""
     if fps is not None and not 0 < fps <= 240:
         raise InvalidInput("fps must be in (0, 240]")
@@ -41,7 +43,8 @@ def ingest_params(path: str, *, fps: float | None = DEFAULT_FPS, source: str | N
     if dedup_hamming is not None and not 0 <= dedup_hamming <= 64:
         raise InvalidInput("dedup_hamming must be 0..64 bits (or None: keep near-duplicates)")
     return {"path": path, "fps": fps, "source": source, "illusion_types": illusion_types or [],
-            "dedup_hamming": dedup_hamming, "user_id": user_id, "original_name": original_name}
+            "dedup_hamming": dedup_hamming, "user_id": user_id, "original_name": original_name,
+            "prefilter": prefilter}
 
 
 def ingest_video(ctx: JobContext) -> dict[str, Any]:
@@ -95,6 +98,10 @@ def ingest_video(ctx: JobContext) -> dict[str, Any]:
         video = s.get(Video, video_id)
         video.meta = {**video.meta, "ingest": "complete", "frames": kept, "dropped_duplicates": dropped}
     ctx.log(f"kept {kept} frames ({new} new), dropped {dropped} near-duplicates")
+    if p.get("prefilter"):
+        with transaction(ctx.sessions) as s:
+            jobs = launch_prefilter(s, ctx.env.submit, None, video_id=video_id)
+        ctx.log(f"queued {len(jobs)} prefilter jobs")
     return {"video_id": video_id, "frames": kept, "new_frames": new, "dropped_duplicates": dropped}
 
 

@@ -13,7 +13,7 @@ import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import timedelta
-from typing import Any
+from typing import Any, Protocol
 
 from sqlalchemy import select, update
 from sqlalchemy.orm import Session, sessionmaker
@@ -108,18 +108,38 @@ def heartbeat(session: Session, worker: str) -> None:
                     .values(heartbeat_at=utcnow()))
 
 
-@dataclass
-class JobContext:
-    """What a job handler gets: its parameters, the data layer, and a way to report progress."""
+class JobEnv(Protocol):
+    """What jobs run against: the data layer, settings, and a way to queue follow-up jobs."""
 
-    job_id: int
-    params: dict[str, Any]
     sessions: sessionmaker[Session]
     media: MediaStore
     settings: Any
+
+    def submit(self, session: Session, kind: str, params: dict[str, Any], user: User | None) -> Job: ...
+
+
+@dataclass
+class JobContext:
+    """What a job handler gets: its parameters, its environment, and a way to report progress."""
+
+    job_id: int
+    params: dict[str, Any]
+    env: JobEnv
     _last_flush: float = field(default=0.0, repr=False)
     _pending_log: list[str] = field(default_factory=list, repr=False)
     _progress: float = field(default=0.0, repr=False)
+
+    @property
+    def sessions(self) -> sessionmaker[Session]:
+        return self.env.sessions
+
+    @property
+    def media(self) -> MediaStore:
+        return self.env.media
+
+    @property
+    def settings(self) -> Any:
+        return self.env.settings
 
     def log(self, message: str) -> None:
         self._pending_log.append(f"{time.strftime('%H:%M:%S')} {message}")
@@ -150,8 +170,7 @@ class JobContext:
 Handler = Callable[[JobContext], dict[str, Any]]
 
 
-def execute_job(job_id: int, handlers: dict[str, Handler], sessions: sessionmaker[Session],
-                media: MediaStore, settings: Any) -> JobState:
+def execute_job(job_id: int, handlers: dict[str, Handler], env: JobEnv) -> JobState:
     """Run job ``job_id`` once, mirroring everything into its row.
 
     Idempotent on delivery: a job that already succeeded, or that another live worker runs, is
@@ -159,6 +178,7 @@ def execute_job(job_id: int, handlers: dict[str, Handler], sessions: sessionmake
     duplicate their effects.
     """
     me = worker_id()
+    sessions = env.sessions
     with transaction(sessions) as s:
         job = s.get(Job, job_id)
         if job is None or job.state != JobState.queued:
@@ -167,7 +187,7 @@ def execute_job(job_id: int, handlers: dict[str, Handler], sessions: sessionmake
         job.started_at = job.heartbeat_at = utcnow()
         job.log += f"--- attempt {job.attempts} on {me}\n"
         kind, params = job.kind, dict(job.params)
-    ctx = JobContext(job_id, params, sessions, media, settings)
+    ctx = JobContext(job_id, params, env)
     try:
         handler = handlers.get(kind)
         if handler is None:
@@ -187,3 +207,18 @@ def execute_job(job_id: int, handlers: dict[str, Handler], sessions: sessionmake
         job = s.get(Job, job_id)
         job.state, job.result, job.finished_at = JobState.succeeded, result, utcnow()
     return JobState.succeeded
+
+
+def run_queued_jobs(handlers: dict[str, Handler], env: JobEnv) -> list[tuple[int, JobState]]:
+    """Run every queued job in this process, oldest first, including jobs they queue; then return.
+
+    The database is the source of truth, so this works without the queue: a worker that later
+    receives the same ids finds them finished and does nothing.
+    """
+    ran = []
+    while True:
+        with env.sessions() as s:
+            job_id = s.scalar(select(Job.id).where(Job.state == JobState.queued).order_by(Job.id).limit(1))
+        if job_id is None:
+            return ran
+        ran.append((job_id, execute_job(job_id, handlers, env)))

@@ -8,16 +8,14 @@ from typing import Any
 from sqlalchemy import Select, and_, func, select
 from sqlalchemy.orm import Session
 
+from annotation.vlm.prompt import QUESTION_LABELS
 from dataset.models import Frame, FrameState, PrefilterResult, Review, ReviewDecision, User, utcnow
 from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound, ServiceError
 from dataset.services.frames import frame_json
 
 REJECT_REASONS = ("blurry", "occluded", "no illusion", "watermark", "duplicate")
-# Short names of the prefilter prompt's 12 questions, in order, for the review grid.
-QUESTION_LABELS = ("flat art", "perspective illusion", "illusion graffiti", "transparent/reflective",
-                   "3D on a screen", "looks 3D", "heavy watermark", "corner watermark", "blurry",
-                   "hands cover art", "software UI", "only artist sharp")
+
 REVIEWABLE = (FrameState.prefiltered, FrameState.approved, FrameState.rejected)
 # "reset" undoes a decision: the frame goes back to the curators' queue.
 DECISIONS = ("approve", "reject", "reset")
@@ -71,7 +69,10 @@ def review_many(session: Session, items: Sequence[dict[str, Any]], user: User | 
                 frame = review_frame(session, int(item["id"]), user, decision, reason, item.get("revision"))
             results.append({"id": frame.id, "status": 200, "frame": current_item(session, frame.id)})
         except ServiceError as exc:
-            results.append({"id": item.get("id"), "status": exc.status, "error": str(exc)})
+            result = {"id": item.get("id"), "status": exc.status, "error": str(exc)}
+            if isinstance(exc, Conflict):  # let the page show what the frame is now
+                result["frame"] = current_item(session, int(item["id"]))
+            results.append(result)
         except (KeyError, TypeError, ValueError):
             results.append({"id": item.get("id") if isinstance(item, dict) else None, "status": 400,
                             "error": "each item needs an integer id (and optionally revision)"})
@@ -155,7 +156,8 @@ def review_item(session: Session, frame: Frame, result: PrefilterResult | None =
     item["thumb"] = frame.assets.get("thumb", frame.media_key)
     item["prefilter"] = None if result is None else {
         "backend": result.backend, "model_id": result.model_id, "prompt_version": result.prompt_version,
-        "answers": result.answers, "parsed": result.parsed, "keep": result.keep, "metrics": result.metrics,
+        "answers": result.answers, "parsed": result.parsed, "keep": result.keep, "reason": result.reason,
+        "metrics": result.metrics,
         "raw": result.raw_answer}
     item["last_review"] = last_review
     return item

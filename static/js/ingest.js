@@ -46,7 +46,9 @@ function follow(job, row) {
 form.addEventListener("submit", async (event) => {
   event.preventDefault();
   const files = [...form.elements.file.files];
-  const fields = [...new FormData(form)].filter(([key]) => key !== "file");
+  // An unchecked box sends nothing, and the API's default is to prefilter: always say it explicitly.
+  const fields = [...new FormData(form)].filter(([key]) => !["file", "prefilter"].includes(key));
+  fields.push(["prefilter", form.elements.prefilter.checked ? "1" : "0"]);
   for (const file of files) {
     const row = el("li", {}, el("span", { className: "name" }, file.name), el("progress", { max: 1, value: 0 }),
       el("span", { className: "status" }, "uploading…"));

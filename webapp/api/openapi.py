@@ -54,6 +54,8 @@ def openapi_document() -> dict[str, Any]:
                 "post": _op("Upload a video (multipart: file, fps, source, illusion_type…); starts an ingest job",
                             "curator", body="VideoUpload", ok="202", schema="Job"),
             },
+            "/prefilter": {"post": _op("Queue VLM prefilter jobs for unclaimed ingested frames", "curator",
+                                       body="PrefilterRequest", ok="202", schema="JobBatch")},
             "/review/frames": {"get": _op("Frames to review with VLM answers and figures", "curator", schema="ReviewPage",
                                           params=[_q("video_id"), _q("state", "string", "prefiltered (default), approved, rejected, all"),
                                                   _q("keep", "string", "VLM verdict: true, false, null"),
@@ -98,10 +100,15 @@ def openapi_document() -> dict[str, Any]:
                     "state": {"enum": ["queued", "running", "succeeded", "failed", "interrupted"]},
                     "progress": {"type": "number", "minimum": 0, "maximum": 1}, "error": {"type": ["string", "null"]},
                     "result": {}, "log": {"type": "string"}}},
+                "PrefilterRequest": {"type": "object", "properties": {
+                    "video_id": {"type": "integer"}, "backend": {"enum": ["heuristic", "openai", "transformers"]},
+                    "sparse": {"type": "boolean", "description": "the authors' sparse mode"}}},
+                "JobBatch": {"type": "object", "properties": {"jobs": {"type": "array", "items": {"$ref": "#/components/schemas/Job"}}}},
                 "VideoList": {"type": "object", "properties": {"items": {"type": "array", "items": {"type": "object"}}}},
                 "VideoUpload": {"type": "object", "required": ["file"], "properties": {
                     "file": {"type": "string", "format": "binary"}, "fps": {"type": "number"},
                     "source": {"enum": ["web", "generated", "real_capture"]},
+                    "prefilter": {"type": "boolean", "description": "queue the VLM prefilter afterwards (default true)"},
                     "illusion_type": {"type": "array", "items": {"enum": ["inpainting", "picture", "replay", "holography", "mirror"]}}}},
                 "ReviewDecision": {"type": "object", "required": ["decision"], "properties": {
                     "decision": {"enum": ["approve", "reject", "reset"]}, "reason": {"type": "string", "maxLength": 256},

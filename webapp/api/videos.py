@@ -14,7 +14,8 @@ from dataset.models import Frame, Role, User, Video
 from dataset.services import jobs as job_service
 from dataset.services.errors import InvalidInput
 from dataset.services.ingest import DEFAULT_DEDUP_HAMMING, ingest_params
-from webapp.api.blueprint import api
+from dataset.services.prefilter import launch_prefilter
+from webapp.api.blueprint import api, json_body
 from webapp.app import runtime
 from webapp.auth import requires
 
@@ -47,7 +48,8 @@ def upload_video() -> ResponseReturnValue:
         raise InvalidInput("fps must be a number") from None
     params = ingest_params("", fps=fps or None, source=request.form.get("source") or None,
                            illusion_types=request.form.getlist("illusion_type"),
-                           dedup_hamming=DEFAULT_DEDUP_HAMMING, user_id=current_user.id, original_name=name)
+                           dedup_hamming=DEFAULT_DEDUP_HAMMING, user_id=current_user.id, original_name=name,
+                           prefilter=request.form.get("prefilter", "1") not in ("0", "false", ""))
     rt = runtime()
     key = rt.media.put_stream(upload.stream, ext)
     params["path"] = str(rt.media.path(key))
@@ -55,3 +57,16 @@ def upload_video() -> ResponseReturnValue:
     job = rt.queue.submit(g.db, "ingest", params, user)
     g.db.commit()
     return job_service.job_json(job), 202
+
+
+@api.post("/prefilter")
+@requires(Role.curator)
+def start_prefilter() -> ResponseReturnValue:
+    """Queue prefilter jobs: body ``{"video_id"?, "backend"?, "sparse"?}``."""
+    body = json_body()
+    video_id = body.get("video_id")
+    jobs = launch_prefilter(g.db, runtime().submit, g.db.get(User, current_user.id),
+                            video_id=int(video_id) if video_id is not None else None,
+                            backend=body.get("backend") or None, sparse=bool(body.get("sparse")))
+    g.db.commit()
+    return {"jobs": [job_service.job_json(j) for j in jobs]}, 202

@@ -8,7 +8,7 @@ import click
 
 from webapp.cli.bench import bench
 from webapp.cli.geometry import geometry
-from webapp.cli.ingest import frames, ingest
+from webapp.cli.ingest import frames, ingest, prefilter
 from webapp.cli.jobs import jobs, worker
 from webapp.cli.state import CliState
 from webapp.cli.users import users
@@ -28,5 +28,5 @@ def main(ctx: click.Context, data_dir: Path | None) -> None:
     ctx.obj = CliState(data_dir)
 
 
-for command in (init, serve, worker, demo, synth, ingest, frames, users, jobs, geometry, bench):
+for command in (init, serve, worker, demo, synth, ingest, prefilter, frames, users, jobs, geometry, bench):
     main.add_command(command)

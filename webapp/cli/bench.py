@@ -22,7 +22,21 @@ def bench() -> None:
 @click.option("--repeats", type=click.IntRange(min=1), default=5, show_default=True, help="Timed runs per figure.")
 def geometry_benchmark(as_json: bool, repeats: int) -> None:
     """Time plane fitting, right-view synthesis, inpainting and reprojection against references."""
-    results = run_geometry_benchmark(repeats=repeats)
+    _report(run_geometry_benchmark(repeats=repeats), as_json)
+
+
+@bench.command("prefilter")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@click.option("--frames", type=click.IntRange(min=10), default=400, show_default=True)
+@click.option("--concurrency", type=click.IntRange(min=1, max=256), default=16, show_default=True)
+def prefilter_benchmark(as_json: bool, frames: int, concurrency: int) -> None:
+    """Frames per second the openai backend's client sustains against an instant local server."""
+    from annotation.vlm.benchmark import run_prefilter_bench
+
+    _report(run_prefilter_bench(frames=frames, concurrency=concurrency), as_json)
+
+
+def _report(results: dict[str, object], as_json: bool) -> None:
     if as_json:
         click.echo(json.dumps(results))
         return

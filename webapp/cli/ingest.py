@@ -29,10 +29,12 @@ NO_WORKER_HINT_S = 10.0
               help="Illusion types shown (repeatable).")
 @click.option("--dedup", default=DEFAULT_DEDUP_HAMMING, show_default=True, type=click.IntRange(-1, 64),
               help="Drop a frame within this many dHash bits of the last kept one (-1: keep all).")
+@click.option("--prefilter/--no-prefilter", default=False, show_default=True,
+              help="Queue the VLM prefilter for the new frames once a video is ingested.")
 @click.option("--wait", is_flag=True, help="Wait for the jobs, show progress, exit non-zero if one fails.")
 @pass_state
 def ingest(state: CliState, paths: tuple[Path, ...], fps: float, source: str | None,
-           illusion_types: tuple[str, ...], dedup: int, wait: bool) -> None:
+           illusion_types: tuple[str, ...], dedup: int, prefilter: bool, wait: bool) -> None:
     """Queue video files, folders of videos, or synthetic scenes for ingest (a worker decodes them)."""
     try:
         sources = find_sources(list(paths))
@@ -44,7 +46,7 @@ def ingest(state: CliState, paths: tuple[Path, ...], fps: float, source: str | N
     with service_errors(), transaction(rt.sessions) as s:
         job_ids = [rt.queue.submit(s, "ingest", ingest_params(
             str(p), fps=fps or None, source=source, illusion_types=list(illusion_types),
-            dedup_hamming=None if dedup < 0 else dedup), None).id for p in sources]
+            dedup_hamming=None if dedup < 0 else dedup, prefilter=prefilter), None).id for p in sources]
     for path, job_id in zip(sources, job_ids, strict=True):
         click.echo(f"job {job_id}: ingest {path}")
     if wait:
@@ -101,3 +103,30 @@ def list_frames_cmd(state: CliState, video_id: int | None, frame_state: str | No
         click.echo(f"{f['id']:>7} video {f['video_id']:<5} {f['time_s']:8.2f} s  {f['width']}x{f['height']}  "
                    f"{f['state']:<12} {keep}")
     click.echo(f"{len(items)} of {total} frames", err=True)
+
+
+@click.command()
+@click.option("--video", "video_id", type=int, default=None, help="Only this video (default: every ingested frame).")
+@click.option("--backend", type=click.Choice(["heuristic", "openai", "transformers"]), default=None,
+              help="VLM backend (default from settings: vlm_backend).")
+@click.option("--base-url", default=None, help="openai backend: the server's /v1 URL (default: vlm_base_url).")
+@click.option("--model", default=None, help="openai backend: model name (default: vlm_model).")
+@click.option("--sparse", is_flag=True, help="The authors' sparse mode: ask about every step-th frame of a video.")
+@click.option("--chunk", default=32, show_default=True, type=click.IntRange(1, 1000), help="Frames per job.")
+@click.option("--wait", is_flag=True, help="Wait for the jobs, show progress, exit non-zero if one fails.")
+@pass_state
+def prefilter(state: CliState, video_id: int | None, backend: str | None, base_url: str | None, model: str | None,
+              sparse: bool, chunk: int, wait: bool) -> None:
+    """Ask the VLM the paper's 12 questions about every ingested frame; survivors go to curators."""
+    from dataset.services.prefilter import launch_prefilter
+
+    rt = state.runtime
+    with service_errors(), transaction(rt.sessions) as s:
+        job_ids = [j.id for j in launch_prefilter(s, rt.submit, None, video_id=video_id, backend=backend,
+                                                   base_url=base_url, model=model, sparse=sparse, chunk=chunk)]
+    if not job_ids:
+        click.echo("no ingested frames waiting for the prefilter")
+        return
+    click.echo(f"queued {len(job_ids)} prefilter jobs: {', '.join(map(str, job_ids))}")
+    if wait:
+        wait_for_jobs(state, job_ids)

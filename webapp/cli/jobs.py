@@ -18,10 +18,20 @@ from webapp.cli.state import CliState, pass_state
 @click.command()
 @click.option("--concurrency", default=1, show_default=True, type=click.IntRange(1, 64),
               help="Jobs run at once by this worker (threads). Run more workers for more processes.")
+@click.option("--burst", is_flag=True, help="Run the queued jobs (and those they queue) in this process, then exit.")
 @pass_state
-def worker(state: CliState, concurrency: int) -> None:
+def worker(state: CliState, concurrency: int, burst: bool) -> None:
     """Run jobs from the queue until interrupted (Ctrl-C). Start as many as you like."""
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    if burst:
+        from webapp.jobs.handlers import HANDLERS
+
+        results = job_service.run_queued_jobs(HANDLERS, state.runtime)
+        for job_id, job_state in results:
+            click.echo(f"job {job_id}: {job_state.value}")
+        if any(s.value != "succeeded" for _, s in results):
+            raise click.ClickException("some jobs did not succeed; see `illusion-studio jobs list`")
+        return
     queue = state.runtime.queue
     click.echo(f"worker {job_service.worker_id()} on {state.settings.queue_url or state.settings.queue_path}", err=True)
     queue.run_worker(concurrency)

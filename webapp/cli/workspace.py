@@ -133,9 +133,10 @@ def demo(state: CliState, no_serve: bool, videos: int, host: str | None, port: i
             logins.append((role.value, password))
         admin = s.scalar(select(User).where(User.name == Role.admin.value))
         imported = set(s.scalars(select(Video.original_path)))
-        jobs = [rt.queue.submit(s, "ingest", ingest_params(str(p), user_id=admin.id), admin)
+        # Synthetic scenes pan slowly but every frame is distinct, so no de-duplication here.
+        jobs = [rt.queue.submit(s, "ingest", ingest_params(str(p), user_id=admin.id, dedup_hamming=None,
+                                                           prefilter=True), admin)
                 for p in video_dirs if str(p) not in imported]
-    job_ids = [j.id for j in jobs]
 
     click.echo("\nDemo users (name / password):")
     for name, password in logins:
@@ -145,15 +146,15 @@ def demo(state: CliState, no_serve: bool, videos: int, host: str | None, port: i
         from webapp.jobs.handlers import HANDLERS
 
         # The same code a worker runs, in this process, so the workspace is complete on exit.
-        for job_id in job_ids:
-            state_ = job_service.execute_job(job_id, HANDLERS, rt.sessions, rt.media, settings)
-            click.echo(f"import job {job_id}: {state_.value}")
+        for job_id, job_state in job_service.run_queued_jobs(HANDLERS, rt):
+            click.echo(f"job {job_id}: {job_state.value}")
         click.echo(f"\nworkspace ready at {settings.home}; run `illusion-studio --data-dir {settings.home} serve`")
         return
 
     env = {**os.environ, HOME_ENV: str(settings.home)}
     worker = subprocess.Popen([sys.executable, "-m", "webapp.cli", "worker"], env=env)
-    click.echo(f"worker started (pid {worker.pid}); importing {len(job_ids)} videos in the background", err=True)
+    click.echo(f"worker started (pid {worker.pid}); ingesting and prefiltering {len(jobs)} videos in the background",
+               err=True)
     try:
         _serve(state, host, port, threads=8)
     finally:

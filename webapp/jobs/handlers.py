@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from dataset.services.jobs import Handler
 from dataset.services.ingest import ingest_video
+from dataset.services.prefilter import prefilter_frames
 
 HANDLERS: dict[str, Handler] = {
     "ingest": ingest_video,
+    "prefilter": prefilter_frames,
 }

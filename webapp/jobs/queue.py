@@ -58,8 +58,7 @@ class JobQueue:
         return job
 
     def _execute(self, job_id: int) -> str:
-        rt = self.runtime
-        return job_rows.execute_job(job_id, HANDLERS, rt.sessions, rt.media, rt.settings).value
+        return job_rows.execute_job(job_id, HANDLERS, self.runtime).value
 
     def run_worker(self, concurrency: int = 1) -> None:
         """Run a consumer until SIGINT/SIGTERM, with a heartbeat thread that also reaps lost jobs."""

@@ -2,7 +2,7 @@
 
 Revision ID: 0001
 Revises: 
-Create Date: 2026-11-21 23:50:03.932377
+Create Date: 2026-11-21 23:53:20.618043
 """
 
 from alembic import op
@@ -146,6 +146,7 @@ def upgrade() -> None:
     sa.Column('answers', sa.JSON(), nullable=False),
     sa.Column('parsed', sa.Boolean(), nullable=False),
     sa.Column('keep', sa.Boolean(), nullable=True),
+    sa.Column('reason', sa.Text(), nullable=False),
     sa.Column('metrics', sa.JSON(), nullable=False),
     sa.Column('created_at', sa.DateTime(), nullable=False),
     sa.ForeignKeyConstraint(['frame_id'], ['frames.id'], name=op.f('fk_prefilter_results_frame_id_frames'), ondelete='CASCADE'),

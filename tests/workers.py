@@ -1,0 +1,94 @@
+"""Real worker processes over a real queue: SQLite always, Redis when TEST_REDIS_URL is set.
+
+Modules that import these fixtures may define an ``extra_settings`` fixture (a dict) that goes
+into the workspace's settings file, which the worker processes read too.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+import uuid
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from dataset.db import migrate
+from dataset.models import Job
+from webapp.runtime import Runtime
+from webapp.settings import Settings
+from tests.conftest import TEST_REDIS_URL, make_settings
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture
+def extra_settings() -> dict[str, Any]:
+    return {}
+
+
+@pytest.fixture(params=["sqlite", "redis"])
+def queue_settings(request: pytest.FixtureRequest, tmp_path: Path, extra_settings: dict[str, Any]) -> Settings:
+    home = tmp_path / "ws"
+    home.mkdir()
+    values = dict(extra_settings)
+    if request.param == "redis":
+        if not TEST_REDIS_URL:
+            pytest.skip("Redis queue tests need TEST_REDIS_URL (e.g. redis://127.0.0.1:6379/0)")
+        # A queue name of its own, so parallel or leftover runs never share a backlog.
+        values.update(queue_url=TEST_REDIS_URL, queue_name=f"test-{uuid.uuid4().hex[:8]}")
+    # TOML basic strings and JSON strings share their escapes, so json.dumps writes valid TOML values here.
+    (home / "illusion-studio.toml").write_text("".join(f"{k} = {json.dumps(v)}\n" for k, v in values.items()))
+    settings = make_settings(home)
+    migrate(settings.database_url)
+    return settings
+
+
+@pytest.fixture
+def rt(queue_settings: Settings) -> Iterator[Runtime]:
+    runtime = Runtime(queue_settings)
+    yield runtime
+    if queue_settings.queue_url:
+        runtime.queue.huey.flush()
+    runtime.close()
+
+
+@pytest.fixture
+def start_worker(queue_settings: Settings) -> Iterator[Callable[[], subprocess.Popen[bytes]]]:
+    """Start real `illusion-studio worker` processes; all are stopped after the test."""
+    procs: list[subprocess.Popen[bytes]] = []
+
+    def start() -> subprocess.Popen[bytes]:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "webapp.cli", "--data-dir", str(queue_settings.home), "worker"],
+            cwd=ROOT, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        procs.append(proc)
+        return proc
+
+    yield start
+    for proc in procs:
+        if proc.poll() is None:
+            proc.terminate()
+    for proc in procs:
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+
+
+def wait_for(rt: Runtime, job_id: int, predicate: Callable[[Job], bool], timeout: float = 90) -> Job:
+    """Poll a job's row until ``predicate`` holds."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        with rt.sessions() as s:
+            job = s.get(Job, job_id)
+            if predicate(job):
+                return job
+        time.sleep(0.01)
+    raise AssertionError(f"job {job_id} never reached the expected state; last: {job.state} {job.progress} {job.error}")
