@@ -6,16 +6,21 @@ BIN := $(VENV)/bin
 TORCH_SPEC ?= torch==2.13.0
 PYTEST_ARGS ?=
 
-.PHONY: demo test venv venv-test bench clean
+.PHONY: demo test lint venv venv-test bench clean
 
 demo: $(VENV)/.installed
 	$(BIN)/illusion-studio demo
 
 test: $(VENV)/.installed-test
+	$(BIN)/ruff check .
 	$(BIN)/python -m pytest $(PYTEST_ARGS)
+
+lint: $(VENV)/.installed-test
+	$(BIN)/ruff check .
 
 bench: $(VENV)/.installed-test
 	$(BIN)/illusion-studio bench geometry --json
+	$(BIN)/illusion-studio bench prefilter --json
 
 venv: $(VENV)/.installed
 venv-test: $(VENV)/.installed-test

@@ -13,7 +13,7 @@ import pytest
 from sqlalchemy import create_engine, text
 from sqlalchemy.engine import make_url
 
-from dataset.db import migrate, normalise_url, transaction
+from dataset.db import make_engine, make_session_factory, migrate, normalise_url, transaction
 from dataset.models import Role
 from dataset.services import users as user_service
 from webapp.runtime import Runtime
@@ -56,6 +56,15 @@ def db_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
     if request.param == "sqlite":
         return f"sqlite:///{tmp_path / 'test.db'}"
     return request.getfixturevalue("postgres_url")
+
+
+@pytest.fixture
+def sessions(db_url: str):  # type: ignore[no-untyped-def]
+    """A session factory on a migrated database of each backend."""
+    migrate(db_url)
+    engine = make_engine(db_url)
+    yield make_session_factory(engine)
+    engine.dispose()
 
 
 def make_settings(home: Path, **overrides: object) -> Settings:
@@ -112,3 +121,8 @@ def csrf_from(html: str) -> str:
 def login(client, name: str, password: str = PASSWORD):  # type: ignore[no-untyped-def]
     token = csrf_from(client.get("/login").get_data(as_text=True))
     return client.post("/login", data={"name": name, "password": password, "csrf_token": token})
+
+
+# One browser per test session, for every browser test module (a fixture defined in two modules
+# would start two Playwright loops, and the second refuses to run).
+from tests.browser import browser  # noqa: E402, F401

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.browser import browser, running_demo  # noqa: F401  (fixture)
+from tests.browser import running_demo
 
 pytestmark = pytest.mark.browser
 

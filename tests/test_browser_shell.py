@@ -6,14 +6,14 @@ from pathlib import Path
 
 import pytest
 
-from tests.browser import browser, running_demo  # noqa: F401  (fixture)
+from tests.browser import running_demo
 
 pytestmark = pytest.mark.browser
 
 NAV = {
-    "annotator": ["dashboard", "frames", "jobs"],
-    "curator": ["dashboard", "frames", "review", "ingest", "jobs"],
-    "admin": ["dashboard", "frames", "review", "ingest", "jobs", "users"],
+    "annotator": ["dashboard", "annotate", "frames", "jobs"],
+    "curator": ["dashboard", "annotate", "frames", "review", "ingest", "jobs"],
+    "admin": ["dashboard", "annotate", "frames", "review", "ingest", "jobs", "users"],
 }
 
 

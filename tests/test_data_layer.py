@@ -9,21 +9,12 @@ from alembic.runtime.migration import MigrationContext
 from sqlalchemy import func, select, text
 from sqlalchemy.exc import IntegrityError
 
-from dataset.db import alembic_config, make_engine, make_session_factory, migrate, schema_is_current, transaction
-from dataset.models import (AuditEntry, Base, Frame, FrameState, PrefilterResult, Role, SourceKind, User,
-                            Video)
+from dataset.db import alembic_config, make_engine, migrate, schema_is_current, transaction
+from dataset.models import AuditEntry, Base, Frame, FrameState, PrefilterResult, Role, SourceKind, User, Video
 from dataset.services import audit
 from dataset.services import users as user_service
 from dataset.services.errors import Conflict, InvalidInput
 from dataset.services.frames import funnel_counts, list_frames
-
-
-@pytest.fixture
-def sessions(db_url: str):  # type: ignore[no-untyped-def]
-    migrate(db_url)
-    engine = make_engine(db_url)
-    yield make_session_factory(engine)
-    engine.dispose()
 
 
 def _video(s, name: str = "v") -> Video:  # type: ignore[no-untyped-def]

@@ -18,9 +18,9 @@ from dataset.models import Frame, Job, JobState, Video
 from dataset.services import jobs as job_service
 from dataset.services.ingest import ingest_params
 from dataset.synthetic import write_synthetic_dataset
+from tests.test_cli import cli
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime
-from tests.test_cli import cli
 
 
 def write_avi(path: Path, n: int, fps: float = 10, size: tuple[int, int] = (160, 90), seed: int = 0) -> Path:
@@ -177,8 +177,8 @@ def test_upload_validates_and_starts_an_ingest_job(client, runtime, tokens, tmp_
 
 
 def test_upload_size_limit(tmp_path: Path) -> None:
-    from tests.conftest import make_settings
     from dataset.db import migrate
+    from tests.conftest import make_settings
     from webapp.app import create_app
 
     settings = make_settings(tmp_path / "ws", max_upload_mb=1)

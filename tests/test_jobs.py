@@ -6,10 +6,8 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable
 from pathlib import Path
 
-import pytest
 from sqlalchemy import func, select
 
 from dataset.db import transaction
@@ -17,9 +15,10 @@ from dataset.models import Frame, Job, JobState
 from dataset.services import jobs as job_service
 from dataset.services.ingest import ingest_params
 from dataset.synthetic import write_synthetic_dataset
+from tests.workers import extra_settings, queue_settings, rt, start_worker, wait_for  # noqa: F401  (fixtures)
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime
-from tests.workers import extra_settings, queue_settings, rt, start_worker, wait_for  # noqa: F401  (fixtures)
+
 
 def submit_import(rt: Runtime, path: Path) -> int:
     with transaction(rt.sessions) as s:

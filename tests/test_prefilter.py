@@ -13,16 +13,16 @@ from sqlalchemy import func, select
 
 from annotation.vlm.local_server import ChatRequest, LocalVLMServer, Reply
 from dataset.db import transaction
-from dataset.models import Frame, FrameState, Job, PrefilterResult
+from dataset.models import Frame, Job, PrefilterResult
 from dataset.services import jobs as job_service
 from dataset.services.frames import funnel_counts
 from dataset.services.ingest import ingest_params
 from dataset.services.prefilter import launch_prefilter
 from dataset.synthetic import write_synthetic_dataset
-from webapp.jobs.handlers import HANDLERS
-from webapp.runtime import Runtime
 from tests.conftest import make_settings
 from tests.workers import extra_settings, queue_settings, rt, start_worker, wait_for  # noqa: F401  (fixtures)
+from webapp.jobs.handlers import HANDLERS
+from webapp.runtime import Runtime
 
 KEEP = "no,yes,no,no,no,no,no,no,no,no,no,no"  # Q2 perspective illusion: keep
 BLURRY = "no,yes,no,no,no,no,no,no,yes,no,no,no"  # Q9 too blurry: reject
@@ -147,11 +147,11 @@ def test_frames_are_claimed_once_and_retries_do_not_ask_again(openai_rt: Runtime
 
 
 @pytest.fixture
-def extra_settings(vlm: LocalVLMServer) -> dict[str, Any]:  # noqa: F811  (overrides the default: workers use the VLM)
+def extra_settings(vlm: LocalVLMServer) -> dict[str, Any]:
     return {"vlm_backend": "openai", "vlm_base_url": vlm.base_url, "vlm_model": "test-vlm"}
 
 
-def test_workers_share_the_backlog_without_asking_twice(rt: Runtime, start_worker, tmp_path: Path,  # noqa: F811
+def test_workers_share_the_backlog_without_asking_twice(rt: Runtime, start_worker, tmp_path: Path,
                                                          vlm: LocalVLMServer) -> None:
     ingest(rt, write_video(tmp_path / "v.avi", [200] * 24))
     before = vlm.request_count

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from sqlalchemy import select
 
-from dataset.db import make_engine, make_session_factory, migrate, transaction
+from dataset.db import transaction
 from dataset.models import AuditEntry, Frame, FrameState, PrefilterResult, Review, SourceKind, Video
 from dataset.services import review as review_service
 from dataset.services import users as user_service
@@ -31,13 +31,6 @@ def seed_frames(s, n: int = 4) -> list[int]:  # type: ignore[no-untyped-def]
         ids.append(frame.id)
     return ids
 
-
-@pytest.fixture
-def sessions(db_url: str):  # type: ignore[no-untyped-def]
-    migrate(db_url)
-    engine = make_engine(db_url)
-    yield make_session_factory(engine)
-    engine.dispose()
 
 
 def test_decisions_reasons_conflicts_and_audit(sessions) -> None:  # type: ignore[no-untyped-def]

@@ -19,6 +19,7 @@ EXPECTED: dict[str, Role | None] = {
     "pages.dashboard": Role.annotator,
     "pages.frames": Role.annotator,
     "pages.jobs": Role.annotator,
+    "pages.annotate": Role.annotator,
     "pages.review": Role.curator,
     "pages.ingest": Role.curator,
     "pages.users": Role.admin,
@@ -39,6 +40,14 @@ EXPECTED: dict[str, Role | None] = {
     "api.list_videos": Role.annotator,
     "api.upload_video": Role.curator,
     "api.start_prefilter": Role.curator,
+    "api.annotate_next": Role.annotator,
+    "api.frame_detail": Role.annotator,
+    "api.renew_lease": Role.annotator,
+    "api.release_lease": Role.annotator,
+    "api.segment": Role.annotator,
+    "api.save_annotation": Role.annotator,
+    "api.delete_frame": Role.annotator,
+    "api.propagate": Role.annotator,
 }
 SAMPLE_ARGS = {"job_id": "1", "frame_id": "1", "key": "ab/cd/" + "ab" * 32 + ".png"}
 CALLERS = ["anonymous", *(r.value for r in Role)]

@@ -89,7 +89,7 @@ def test_frame_contract(video: SyntheticVideo) -> None:
             assert d.shape == (360, 640) and d.dtype == np.float32
             assert np.isfinite(d).all() and (d > 0).all()
         # Realistic magnitudes: a room of a few metres with f = 500 px and B = 0.1 m.
-        assert 3 < frame.disparity.min() and frame.disparity.max() < 40
+        assert frame.disparity.min() > 3 and frame.disparity.max() < 40
         assert [(r.pair, r.kind, r.illusion_type) for r in frame.regions] == [
             (0, "picture", "picture"), (1, "mirror", "mirror")]
 
@@ -265,6 +265,6 @@ def test_write_read_round_trip(tmp_path: Path) -> None:
 def test_dataset_is_byte_identical_across_runs(tmp_path: Path) -> None:
     kwargs = dict(videos=2, seed=7, n_frames=2, width=160, height=90)
     first = write_synthetic_dataset(tmp_path / "a", **kwargs)
-    second = write_synthetic_dataset(tmp_path / "b", **kwargs)
+    write_synthetic_dataset(tmp_path / "b", **kwargs)
     assert [p.name for p in first] == ["synthetic-0007", "synthetic-0008"]
     assert _digests(tmp_path / "a") == _digests(tmp_path / "b")

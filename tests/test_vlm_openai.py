@@ -100,17 +100,17 @@ def test_client_errors_are_not_retried(frames, status: int) -> None:
 def test_a_slow_answer_times_out_and_is_retried(frames) -> None:
     script = [Reply(KEEP, delay_s=1.0)]
     started = time.perf_counter()
-    with LocalVLMServer(ScriptedResponder(script, then=fixed_responder(KEEP))) as server:
-        with backend(server, timeout_s=0.2) as client:
-            [verdict] = client.classify([frames["sharp"]])
+    with (LocalVLMServer(ScriptedResponder(script, then=fixed_responder(KEEP))) as server,
+          backend(server, timeout_s=0.2) as client):
+        [verdict] = client.classify([frames["sharp"]])
     assert verdict.keep is True and verdict.metrics["attempts"] == 2
     assert time.perf_counter() - started < 1.0
 
 
 def test_timeouts_every_time_give_a_stored_error(frames) -> None:
-    with LocalVLMServer(ScriptedResponder([Reply(KEEP, delay_s=0.5)] * 2)) as server:
-        with backend(server, timeout_s=0.1, max_retries=1) as client:
-            [verdict] = client.classify([frames["sharp"]])
+    with (LocalVLMServer(ScriptedResponder([Reply(KEEP, delay_s=0.5)] * 2)) as server,
+          backend(server, timeout_s=0.1, max_retries=1) as client):
+        [verdict] = client.classify([frames["sharp"]])
     assert verdict.error is not None and verdict.error.startswith("timeout") and verdict.keep is None
 
 

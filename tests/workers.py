@@ -20,9 +20,9 @@ import pytest
 
 from dataset.db import migrate
 from dataset.models import Job
+from tests.conftest import TEST_REDIS_URL, make_settings
 from webapp.runtime import Runtime
 from webapp.settings import Settings
-from tests.conftest import TEST_REDIS_URL, make_settings
 
 ROOT = Path(__file__).resolve().parent.parent
 

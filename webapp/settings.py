@@ -39,6 +39,8 @@ class Settings(BaseSettings):
     secret_key: str = Field("", description="Flask session key; default one generated into the data dir.")
     max_upload_mb: int = Field(2048, gt=0)
     # Model backends: each has a weight-free default; the others load from a local directory.
+    annotation_lease_s: int = Field(600, ge=30, description="How long a frame stays with an annotator without a renewal.")
+    embedding_cache_mb: int = Field(2048, gt=0, description="Disk budget of the segmenter's embedding cache.")
     segmenter: Literal["classical", "sam2"] = "classical"
     sam2_model_path: Path | None = None
     depth_backend: Literal["precomputed", "depth-anything-v2"] = "precomputed"

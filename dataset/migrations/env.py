@@ -1,8 +1,8 @@
 """Alembic environment: migrations run against the URL put in the config by ``dataset.db``."""
 
 from alembic import context
-from dataset.db import make_engine
 
+from dataset.db import make_engine
 from dataset.models import Base
 
 config = context.config

@@ -8,7 +8,6 @@ from typing import Any
 from sqlalchemy import Select, and_, func, select
 from sqlalchemy.orm import Session
 
-from annotation.vlm.prompt import QUESTION_LABELS
 from dataset.models import Frame, FrameState, PrefilterResult, Review, ReviewDecision, User, utcnow
 from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound, ServiceError

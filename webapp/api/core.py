@@ -14,9 +14,9 @@ from dataset.services import jobs as job_service
 from dataset.services import users as user_service
 from dataset.services.errors import NotFound
 from dataset.services.frames import funnel_counts, list_frames, parse_state
+from webapp.api.blueprint import api, int_arg, json_body
 from webapp.api.openapi import openapi_document
 from webapp.app import runtime
-from webapp.api.blueprint import api, int_arg, json_body
 from webapp.auth import requires
 
 

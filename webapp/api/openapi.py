@@ -4,7 +4,23 @@ from __future__ import annotations
 
 from typing import Any
 
-_ERR = {"description": "error", "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Error"}}}}
+from dataset.models import IllusionType
+
+
+def _ref(name: str) -> dict[str, str]:
+    return {"$ref": f"#/components/schemas/{name}"}
+
+
+def _json(schema: dict[str, Any]) -> dict[str, Any]:
+    return {"application/json": {"schema": schema}}
+
+
+def _list(name: str) -> dict[str, Any]:
+    """An object whose ``items`` are ``name`` schemas."""
+    return {"type": "object", "properties": {"items": {"type": "array", "items": _ref(name)}}}
+
+
+_ERR = {"description": "error", "content": _json(_ref("Error"))}
 
 
 def _op(summary: str, role: str, *, params: list[dict[str, Any]] | None = None,
@@ -14,13 +30,12 @@ def _op(summary: str, role: str, *, params: list[dict[str, Any]] | None = None,
         "description": f"Needs the **{role}** role (or higher).",
         "parameters": params or [],
         "responses": {
-            ok: {"description": "success", "content": {"application/json": {"schema": {"$ref": f"#/components/schemas/{schema}"}}}}
-            if schema else {"description": "success"},
+            ok: {"description": "success", "content": _json(_ref(schema))} if schema else {"description": "success"},
             "401": _ERR, "403": _ERR,
         },
     }
     if body:
-        op["requestBody"] = {"required": True, "content": {"application/json": {"schema": {"$ref": f"#/components/schemas/{body}"}}}}
+        op["requestBody"] = {"required": True, "content": _json(_ref(body))}
         op["responses"]["400"] = _ERR
     return op
 
@@ -29,6 +44,7 @@ def _q(name: str, typ: str = "integer", desc: str = "") -> dict[str, Any]:
     return {"name": name, "in": "query", "required": False, "schema": {"type": typ}, "description": desc}
 
 
+_ILLUSION_TYPES = [t.value for t in IllusionType]
 _JOB_ID = {"name": "job_id", "in": "path", "required": True, "schema": {"type": "integer"}}
 _FRAME_ID = {"name": "frame_id", "in": "path", "required": True, "schema": {"type": "integer"}}
 
@@ -56,13 +72,32 @@ def openapi_document() -> dict[str, Any]:
             },
             "/prefilter": {"post": _op("Queue VLM prefilter jobs for unclaimed ingested frames", "curator",
                                        body="PrefilterRequest", ok="202", schema="JobBatch")},
-            "/review/frames": {"get": _op("Frames to review with VLM answers and figures", "curator", schema="ReviewPage",
-                                          params=[_q("video_id"), _q("state", "string", "prefiltered (default), approved, rejected, all"),
-                                                  _q("keep", "string", "VLM verdict: true, false, null"),
-                                                  _q("question", desc="1..12, with answer"), _q("answer", "string", "yes, no, unknown"),
-                                                  _q("limit", desc="1..500, default 60"), _q("offset")])},
-            "/frames/{frame_id}/review": {"post": _op("Approve, reject (with a reason) or reset a frame; 409 if it changed",
-                                                      "curator", params=[_FRAME_ID], body="ReviewDecision", schema="ReviewItem")},
+            "/review/frames": {"get": _op(
+                "Frames to review with VLM answers and figures", "curator", schema="ReviewPage",
+                params=[_q("video_id"), _q("state", "string", "prefiltered (default), approved, rejected, all"),
+                        _q("keep", "string", "VLM verdict: true, false, null"), _q("question", desc="1..12, with answer"),
+                        _q("answer", "string", "yes, no, unknown"), _q("limit", desc="1..500, default 60"), _q("offset")])},
+            "/frames/{frame_id}/review": {"post": _op(
+                "Approve, reject (with a reason) or reset a frame; 409 if it changed", "curator",
+                params=[_FRAME_ID], body="ReviewDecision", schema="ReviewItem")},
+            "/queue/annotate/next": {"post": _op(
+                "Lease the next approved frame to the caller (404 when none are left)", "annotator", schema="Lease")},
+            "/frames/{frame_id}": {"get": _op("A frame with its annotation, lease and neighbours", "annotator",
+                                              params=[_FRAME_ID], schema="FrameDetail")},
+            "/frames/{frame_id}/lease": {"post": _op("Renew the caller's lease (409: someone else holds it)", "annotator",
+                                                     params=[_FRAME_ID], schema="Lease")},
+            "/frames/{frame_id}/lease/release": {"post": _op("Give the frame back to the queue", "annotator",
+                                                             params=[_FRAME_ID])},
+            "/frames/{frame_id}/segment": {"post": _op("Clicks (and a box) → a mask as COCO RLE", "annotator",
+                                                       params=[_FRAME_ID], body="SegmentRequest", schema="SegmentResult")},
+            "/frames/{frame_id}/annotation": {"post": _op(
+                "Save (submit=false: a draft) or submit the regions; a stale version is a 409", "annotator",
+                params=[_FRAME_ID], body="AnnotationSave")},
+            "/frames/{frame_id}/delete": {"post": _op("Mark the frame redundant or imperceptible", "annotator",
+                                                      params=[_FRAME_ID], body="DeleteFrame")},
+            "/frames/{frame_id}/propagate": {"post": _op(
+                "Carry a region's mask to the next frames as drafts (a job)", "annotator",
+                params=[_FRAME_ID], body="Propagate", ok="202", schema="Job")},
             "/review/bulk": {"post": _op("Review many frames; each item succeeds or fails on its own", "curator",
                                          body="BulkReview", schema="BulkResults")},
             "/stats/funnel": {"get": _op("Pipeline funnel counts", "annotator", schema="Funnel")},
@@ -82,7 +117,7 @@ def openapi_document() -> dict[str, Any]:
                 "Error": {"type": "object", "properties": {"error": {"type": "string"}, "status": {"type": "integer"}}},
                 "User": {"type": "object", "properties": {"id": {"type": "integer"}, "name": {"type": "string"},
                                                           "role": {"enum": ["annotator", "curator", "admin"]}}},
-                "UserList": {"type": "object", "properties": {"items": {"type": "array", "items": {"$ref": "#/components/schemas/User"}}}},
+                "UserList": _list("User"),
                 "NewUser": {"type": "object", "required": ["name", "role", "password"],
                             "properties": {"name": {"type": "string"}, "role": {"enum": ["annotator", "curator", "admin"]},
                                            "password": {"type": "string", "minLength": 8}}},
@@ -92,7 +127,7 @@ def openapi_document() -> dict[str, Any]:
                     "width": {"type": "integer"}, "height": {"type": "integer"}, "state": {"type": "string"},
                     "revision": {"type": "integer"}, "image": {"type": "string", "description": "media key; GET /media/{key}"},
                     "prefilter_keep": {"type": ["boolean", "null"]}}},
-                "FrameList": {"type": "object", "properties": {"items": {"type": "array", "items": {"$ref": "#/components/schemas/Frame"}},
+                "FrameList": {"type": "object", "properties": {"items": {"type": "array", "items": _ref("Frame")},
                                                                "total": {"type": "integer"}}},
                 "Funnel": {"type": "object", "additionalProperties": {"type": "integer"}},
                 "Job": {"type": "object", "properties": {
@@ -103,26 +138,56 @@ def openapi_document() -> dict[str, Any]:
                 "PrefilterRequest": {"type": "object", "properties": {
                     "video_id": {"type": "integer"}, "backend": {"enum": ["heuristic", "openai", "transformers"]},
                     "sparse": {"type": "boolean", "description": "the authors' sparse mode"}}},
-                "JobBatch": {"type": "object", "properties": {"jobs": {"type": "array", "items": {"$ref": "#/components/schemas/Job"}}}},
+                "JobBatch": {"type": "object", "properties": {"jobs": {"type": "array", "items": _ref("Job")}}},
                 "VideoList": {"type": "object", "properties": {"items": {"type": "array", "items": {"type": "object"}}}},
                 "VideoUpload": {"type": "object", "required": ["file"], "properties": {
                     "file": {"type": "string", "format": "binary"}, "fps": {"type": "number"},
                     "source": {"enum": ["web", "generated", "real_capture"]},
                     "prefilter": {"type": "boolean", "description": "queue the VLM prefilter afterwards (default true)"},
-                    "illusion_type": {"type": "array", "items": {"enum": ["inpainting", "picture", "replay", "holography", "mirror"]}}}},
+                    "illusion_type": {"type": "array", "items": {"enum": _ILLUSION_TYPES}}}},
                 "ReviewDecision": {"type": "object", "required": ["decision"], "properties": {
                     "decision": {"enum": ["approve", "reject", "reset"]}, "reason": {"type": "string", "maxLength": 256},
                     "revision": {"type": "integer", "description": "the frame revision the curator saw; stale → 409"}}},
-                "ReviewItem": {"allOf": [{"$ref": "#/components/schemas/Frame"}, {"type": "object", "properties": {
-                    "thumb": {"type": "string"}, "prefilter": {"type": ["object", "null"]}, "last_review": {"type": ["object", "null"]}}}]},
-                "ReviewPage": {"type": "object", "properties": {"items": {"type": "array", "items": {"$ref": "#/components/schemas/ReviewItem"}},
+                "ReviewItem": {"allOf": [_ref("Frame"), {"type": "object", "properties": {
+                    "thumb": {"type": "string"}, "prefilter": {"type": ["object", "null"]},
+                    "last_review": {"type": ["object", "null"]}}}]},
+                "ReviewPage": {"type": "object", "properties": {"items": {"type": "array", "items": _ref("ReviewItem")},
                                                                 "total": {"type": "integer"}, "reasons": {"type": "array"},
                                                                 "questions": {"type": "array"}}},
                 "BulkReview": {"type": "object", "required": ["decision", "items"], "properties": {
                     "decision": {"enum": ["approve", "reject", "reset"]}, "reason": {"type": "string"},
-                    "items": {"type": "array", "items": {"type": "object", "properties": {"id": {"type": "integer"}, "revision": {"type": "integer"}}}}}},
+                    "items": {"type": "array", "items": {"type": "object", "properties": {
+                        "id": {"type": "integer"}, "revision": {"type": "integer"}}}}}},
                 "BulkResults": {"type": "object", "properties": {"results": {"type": "array", "items": {"type": "object"}}}},
-                "JobList": {"type": "object", "properties": {"items": {"type": "array", "items": {"$ref": "#/components/schemas/Job"}}}},
+                "JobList": _list("Job"),
+                "Lease": {"type": "object", "properties": {"frame_id": {"type": "integer"},
+                                                           "lease_expires": {"type": "string", "format": "date-time"}}},
+                "FrameDetail": {"allOf": [_ref("Frame"), {"type": "object", "properties": {
+                    "annotation_version": {"type": "integer"}, "submitted": {"type": "boolean"},
+                    "illusion_type": {"enum": [*_ILLUSION_TYPES, None]}, "regions": {"type": "array", "items": _ref("Region")},
+                    "lease": {"type": "object"}, "prev_id": {"type": ["integer", "null"]},
+                    "next_id": {"type": ["integer", "null"]}, "embedding_ready": {"type": "boolean"}}}]},
+                "RLE": {"type": "object", "description": "COCO run-length encoding (pycocotools)",
+                        "properties": {"size": {"type": "array", "items": {"type": "integer"}}, "counts": {"type": "string"}}},
+                "Region": {"type": "object", "required": ["pair", "kind", "mask"], "properties": {
+                    "pair": {"type": "integer"}, "kind": {"enum": ["illusion", "support"]}, "mask": _ref("RLE"),
+                    "clicks": {"type": "array"}}},
+                "SegmentRequest": {"type": "object", "required": ["points", "labels"], "properties": {
+                    "points": {"type": "array", "items": {"type": "array", "items": {"type": "number"}},
+                               "description": "[[x, y], …] in full-resolution pixels"},
+                    "labels": {"type": "array", "items": {"enum": [0, 1]}},
+                    "box": {"type": "array", "items": {"type": "number"}, "description": "[x0, y0, x1, y1]"},
+                    "region_kind": {"enum": ["illusion", "support"]}, "prev_mask": _ref("RLE")}},
+                "SegmentResult": {"type": "object", "properties": {
+                    "mask": _ref("RLE"), "score": {"type": "number"}, "embedding_cached": {"type": "boolean"},
+                    "model_id": {"type": "string"}, "area": {"type": "integer"}}},
+                "AnnotationSave": {"type": "object", "required": ["version", "regions"], "properties": {
+                    "version": {"type": "integer"}, "regions": {"type": "array", "items": _ref("Region")},
+                    "illusion_type": {"enum": _ILLUSION_TYPES}, "submit": {"type": "boolean", "default": True}}},
+                "DeleteFrame": {"type": "object", "properties": {"reason": {"enum": ["redundant", "imperceptible"]}}},
+                "Propagate": {"type": "object", "required": ["pair", "kind", "mask"], "properties": {
+                    "pair": {"type": "integer"}, "kind": {"enum": ["illusion", "support"]}, "mask": _ref("RLE"),
+                    "count": {"type": "integer", "minimum": 1, "maximum": 100}}},
             },
         },
     }

@@ -6,6 +6,7 @@ from flask import g, request
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
+from annotation.vlm import QUESTION_LABELS
 from dataset.models import Role
 from dataset.services import review as review_service
 from dataset.services.errors import Conflict
@@ -21,7 +22,7 @@ def review_frames() -> ResponseReturnValue:
         keep=request.args.get("keep") or None, question=int_arg("question"), answer=request.args.get("answer") or None,
         limit=int_arg("limit", 60) or 60, offset=int_arg("offset", 0) or 0)
     return {"items": items, "total": total, "reasons": list(review_service.REJECT_REASONS),
-            "questions": list(review_service.QUESTION_LABELS)}
+            "questions": list(QUESTION_LABELS)}
 
 
 @api.post("/frames/<int:frame_id>/review")

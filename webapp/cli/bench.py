@@ -36,6 +36,17 @@ def prefilter_benchmark(as_json: bool, frames: int, concurrency: int) -> None:
     _report(run_prefilter_bench(frames=frames, concurrency=concurrency), as_json)
 
 
+@bench.command("click")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@click.option("--clicks", type=click.IntRange(min=5), default=30, show_default=True)
+@click.option("--no-sam2", is_flag=True, help="Only the classical backend.")
+def click_benchmark(as_json: bool, clicks: int, no_sam2: bool) -> None:
+    """Click → mask over HTTP at 1080p (p50/p95), classical and SAM2, beside in-process predict times."""
+    from webapp.benchmarks.click import run_click_bench
+
+    _report(run_click_bench(clicks=clicks, sam2=not no_sam2), as_json)
+
+
 def _report(results: dict[str, object], as_json: bool) -> None:
     if as_json:
         click.echo(json.dumps(results))

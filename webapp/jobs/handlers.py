@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
-from dataset.services.jobs import Handler
+from dataset.services.annotate import encode_job, propagate_job
 from dataset.services.ingest import ingest_video
+from dataset.services.jobs import Handler
 from dataset.services.prefilter import prefilter_frames
 
 HANDLERS: dict[str, Handler] = {
     "ingest": ingest_video,
     "prefilter": prefilter_frames,
+    "encode": encode_job,
+    "propagate": propagate_job,
 }

@@ -9,12 +9,14 @@ from flask.typing import ResponseReturnValue
 from flask_login import current_user, login_user, logout_user
 from sqlalchemy import select
 
+from annotation.vlm import QUESTION_LABELS
 from dataset.ingest.sources import VIDEO_EXTENSIONS
 from dataset.models import IllusionType, Role, SourceKind, User, Video
 from dataset.services import users as user_service
+from dataset.services.annotate import DELETE_REASONS
 from dataset.services.errors import ServiceError
 from dataset.services.frames import FUNNEL_STAGES, funnel_counts
-from dataset.services.review import QUESTION_LABELS, REJECT_REASONS
+from dataset.services.review import REJECT_REASONS
 from webapp.app import runtime
 from webapp.auth import SessionUser, public, requires
 from webapp.forms import CreateUserForm, LoginForm
@@ -76,6 +78,15 @@ def frames() -> ResponseReturnValue:
 @requires(Role.annotator)
 def jobs() -> ResponseReturnValue:
     return render_template("jobs.html")
+
+
+@pages.get("/annotate")
+@pages.get("/annotate/<int:frame_id>")
+@requires(Role.annotator)
+def annotate(frame_id: int | None = None) -> ResponseReturnValue:
+    """The click-annotation canvas; without a frame id it asks the queue for the next frame."""
+    return render_template("annotate.html", frame_id=frame_id, illusion_types=list(IllusionType),
+                           delete_reasons=DELETE_REASONS, lease_s=runtime().settings.annotation_lease_s)
 
 
 @pages.get("/review")

@@ -1,0 +1,126 @@
+"""Annotation API: the annotator's queue and leases, frame details, click segmentation, save/submit."""
+
+from __future__ import annotations
+
+from flask import g
+from flask.typing import ResponseReturnValue
+from flask_login import current_user
+
+from annotation.segment import SegmentError, rle_to_mask
+from dataset.models import Frame, RegionKind, Role, User
+from dataset.services import annotate
+from dataset.services import jobs as job_service
+from dataset.services.errors import InvalidInput, NotFound
+from webapp.api.blueprint import api, json_body
+from webapp.app import runtime
+from webapp.auth import requires
+
+
+def _iso(value) -> str:  # type: ignore[no-untyped-def]
+    return value.isoformat() + "Z"
+
+
+def _prefetch(frame: Frame) -> None:
+    """Queue embeddings for this frame and the next ones of its video, so clicks never wait."""
+    settings = runtime().settings
+    frames = [g.db.get(Frame, i) for i in annotate.prefetch_ids(g.db, frame)]
+    missing = [f.id for f in frames if not annotate.embedding_ready(settings, f)]
+    if missing:
+        runtime().submit(g.db, "encode", {"frame_ids": missing}, g.db.get(User, current_user.id))
+
+
+@api.post("/queue/annotate/next")
+@requires(Role.annotator)
+def annotate_next() -> ResponseReturnValue:
+    leased = annotate.next_frame(g.db, current_user, runtime().settings.annotation_lease_s)
+    if leased is None:
+        g.db.rollback()
+        raise NotFound("no approved frames are waiting for annotation")
+    frame, expires = leased
+    _prefetch(frame)
+    g.db.commit()
+    return {"frame_id": frame.id, "lease_expires": _iso(expires)}
+
+
+@api.get("/frames/<int:frame_id>")
+@requires(Role.annotator)
+def frame_detail(frame_id: int) -> ResponseReturnValue:
+    detail = annotate.frame_detail(g.db, frame_id, current_user)
+    detail["embedding_ready"] = annotate.embedding_ready(runtime().settings, g.db.get(Frame, frame_id))
+    return detail
+
+
+@api.post("/frames/<int:frame_id>/lease")
+@requires(Role.annotator)
+def renew_lease(frame_id: int) -> ResponseReturnValue:
+    expires = annotate.renew_lease(g.db, frame_id, current_user, runtime().settings.annotation_lease_s)
+    g.db.commit()
+    return {"frame_id": frame_id, "lease_expires": _iso(expires)}
+
+
+@api.post("/frames/<int:frame_id>/lease/release")
+@requires(Role.annotator)
+def release_lease(frame_id: int) -> ResponseReturnValue:
+    annotate.release_lease(g.db, frame_id, current_user)
+    g.db.commit()
+    return {"frame_id": frame_id, "released": True}
+
+
+@api.post("/frames/<int:frame_id>/segment")
+@requires(Role.annotator)
+def segment(frame_id: int) -> ResponseReturnValue:
+    frame = g.db.get(Frame, frame_id)
+    if frame is None:
+        raise NotFound(f"no frame {frame_id}")
+    rt = runtime()
+    return annotate.segment(rt.settings, rt.media, frame, json_body())
+
+
+@api.post("/frames/<int:frame_id>/annotation")
+@requires(Role.annotator)
+def save_annotation(frame_id: int) -> ResponseReturnValue:
+    body = json_body()
+    try:
+        version = int(body["version"])
+    except (KeyError, TypeError, ValueError):
+        raise InvalidInput("version (the annotation_version you loaded) is required") from None
+    submit = bool(body.get("submit", True))
+    ann = annotate.save_annotation(g.db, frame_id, current_user, version=version, regions=body.get("regions", []),
+                                   illusion_type=body.get("illusion_type"), submit=submit)
+    g.db.commit()
+    return {"frame_id": frame_id, "annotation_version": ann.version, "submitted": ann.submitted,
+            "state": g.db.get(Frame, frame_id).state.value}
+
+
+@api.post("/frames/<int:frame_id>/delete")
+@requires(Role.annotator)
+def delete_frame(frame_id: int) -> ResponseReturnValue:
+    frame = annotate.delete_frame(g.db, frame_id, current_user, str(json_body().get("reason", "")))
+    g.db.commit()
+    return {"frame_id": frame.id, "state": frame.state.value}
+
+
+@api.post("/frames/<int:frame_id>/propagate")
+@requires(Role.annotator)
+def propagate(frame_id: int) -> ResponseReturnValue:
+    body = json_body()
+    try:
+        pair, kind, count = int(body["pair"]), RegionKind(body["kind"]).value, int(body.get("count", 5))
+    except (KeyError, TypeError, ValueError):
+        raise InvalidInput("send pair, kind (illusion|support), mask (COCO RLE) and count") from None
+    if not 1 <= count <= 100:
+        raise InvalidInput("count must be 1..100 frames")
+    frame = g.db.get(Frame, frame_id)
+    if frame is None:
+        raise NotFound(f"no frame {frame_id}")
+    try:
+        shape = rle_to_mask(body.get("mask")).shape
+    except SegmentError as exc:
+        raise InvalidInput(f"mask: {exc}") from None
+    if shape != (frame.height, frame.width):
+        raise InvalidInput(f"mask is {shape[1]}x{shape[0]}, the frame {frame.width}x{frame.height}")
+    job = runtime().submit(g.db, "propagate", {"frame_id": frame_id, "pair": pair, "kind": kind, "count": count,
+                                               "mask": body.get("mask"), "user_id": current_user.id},
+                           g.db.get(User, current_user.id))
+    g.db.commit()
+    return job_service.job_json(job), 202
