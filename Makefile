@@ -21,6 +21,9 @@ lint: $(VENV)/.installed-test
 bench: $(VENV)/.installed-test
 	$(BIN)/illusion-studio bench geometry --json
 	$(BIN)/illusion-studio bench prefilter --json
+	$(BIN)/illusion-studio bench click --json
+	$(BIN)/illusion-studio bench generate --json
+	$(BIN)/illusion-studio selftest --json
 
 venv: $(VENV)/.installed
 venv-test: $(VENV)/.installed-test

@@ -255,6 +255,7 @@ class Sample(Base):
     """A generated stereo training sample and everything needed to judge and reproduce it."""
 
     __tablename__ = "samples"
+    __table_args__ = (UniqueConstraint("frame_id", "annotation_version", name="uq_samples_frame_version"),)
 
     id: Mapped[int] = mapped_column(primary_key=True)
     frame_id: Mapped[int] = mapped_column(ForeignKey("frames.id", ondelete="CASCADE"), index=True)

@@ -88,8 +88,11 @@ def test_demo_without_serving_builds_a_complete_workspace(tmp_path: Path) -> Non
     assert result.returncode == 0, result.stderr
     for role in ("annotator", "curator", "admin"):
         assert f"{role}-demo" in result.stdout
-    assert result.stdout.count(": succeeded") == 4  # an ingest and a prefilter job per video
+    # an ingest and a prefilter job per video, then a generation job per annotated frame
+    assert "4 of 4 jobs succeeded" in result.stdout and "6 of 6 jobs succeeded" in result.stdout
     frames = json.loads(cli("--data-dir", str(home), "frames", "list", "--json").stdout)
-    assert len(frames) == 24 and {f["state"] for f in frames} == {"prefiltered"}
+    states = [f["state"] for f in frames]
+    assert len(frames) == 24
+    assert states.count("generated") == 6 and states.count("approved") == 6 and states.count("prefiltered") == 12
     again = cli("--data-dir", str(home), "demo", "--no-serve", "--videos", "2")
-    assert again.returncode == 0 and "succeeded" not in again.stdout  # nothing to do twice
+    assert again.returncode == 0 and "jobs succeeded" not in again.stdout  # nothing to do twice

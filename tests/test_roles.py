@@ -48,8 +48,12 @@ EXPECTED: dict[str, Role | None] = {
     "api.save_annotation": Role.annotator,
     "api.delete_frame": Role.annotator,
     "api.propagate": Role.annotator,
+    "api.list_samples": Role.annotator,
+    "api.get_sample": Role.annotator,
+    "api.review_sample": Role.curator,
+    "api.regenerate_sample": Role.curator,
 }
-SAMPLE_ARGS = {"job_id": "1", "frame_id": "1", "key": "ab/cd/" + "ab" * 32 + ".png"}
+SAMPLE_ARGS = {"job_id": "1", "frame_id": "1", "sample_id": "1", "key": "ab/cd/" + "ab" * 32 + ".png"}
 CALLERS = ["anonymous", *(r.value for r in Role)]
 
 

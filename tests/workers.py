@@ -10,6 +10,7 @@ import json
 import os
 import subprocess
 import sys
+import threading
 import time
 import uuid
 from collections.abc import Callable, Iterator
@@ -59,16 +60,27 @@ def rt(queue_settings: Settings) -> Iterator[Runtime]:
 
 
 @pytest.fixture
-def start_worker(queue_settings: Settings) -> Iterator[Callable[[], subprocess.Popen[bytes]]]:
-    """Start real `illusion-studio worker` processes; all are stopped after the test."""
-    procs: list[subprocess.Popen[bytes]] = []
+def start_worker(queue_settings: Settings) -> Iterator[Callable[[], subprocess.Popen[str]]]:
+    """Start a real `illusion-studio worker` process and return once it listens for jobs;
+    all are stopped after the test."""
+    procs: list[subprocess.Popen[str]] = []
 
-    def start() -> subprocess.Popen[bytes]:
+    def start() -> subprocess.Popen[str]:
         proc = subprocess.Popen(
             [sys.executable, "-m", "webapp.cli", "--data-dir", str(queue_settings.home), "worker"],
             cwd=ROOT, env={**os.environ, "PYTHONUNBUFFERED": "1"},
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         procs.append(proc)
+        ready = threading.Event()
+
+        def drain() -> None:  # keep reading, or a chatty worker would block on a full pipe
+            for line in proc.stderr:
+                if " ready" in line:
+                    ready.set()
+
+        threading.Thread(target=drain, daemon=True).start()
+        if not ready.wait(60):
+            raise AssertionError("the worker did not get ready within 60 s")
         return proc
 
     yield start

@@ -50,6 +50,13 @@ class Settings(BaseSettings):
     vlm_model: str = "Qwen2-VL-72B-Instruct"
     vlm_api_key: str = ""
     vlm_model_path: Path | None = None
+    # Generation (the authors' defaults) and the QA thresholds that flag a sample for a closer look.
+    plane_threshold: float = Field(0.01, gt=0, description="RANSAC inlier threshold on min-max normalised disparity.")
+    plane_hypotheses: int = Field(1000, ge=10)
+    right_view_tau: float = Field(0.9, gt=0, le=1, description="Share of warped pixels that must stay inside the image.")
+    qa_max_hole_fraction: float = Field(0.2, ge=0, le=1)
+    qa_max_stereo_epe: float = Field(2.0, gt=0, description="Flag when SGBM disagrees by more than this (px).")
+    qa_min_inlier_ratio: float = Field(0.5, ge=0, le=1)
     inpaint_backend: Literal["telea", "ns", "none", "lama"] = "telea"
     lama_model_path: Path | None = None
     device: str = Field("cpu", description="torch device for model backends: cpu, cuda, cuda:1 …")

@@ -15,7 +15,7 @@ from dataset.formats.errors import FormatError
 from dataset.formats.float_maps import MAP_SUFFIXES, read_map, write_map
 from dataset.formats.images import read_image, read_rgb, write_png, write_rgb
 from dataset.formats.masks import read_mask, write_mask
-from dataset.formats.pfm import read_pfm, write_pfm
+from dataset.formats.pfm import decode_pfm, encode_pfm, read_pfm, write_pfm
 from dataset.formats.ply import disparity_point_cloud, read_ply, write_ply
 
 __all__ = [
@@ -23,7 +23,9 @@ __all__ = [
     "KITTI_FACTOR",
     "MAP_SUFFIXES",
     "FormatError",
+    "decode_pfm",
     "disparity_point_cloud",
+    "encode_pfm",
     "read_authors_disparity",
     "read_image",
     "read_kitti_disparity",

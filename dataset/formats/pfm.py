@@ -24,6 +24,12 @@ def read_pfm(path: str | Path) -> np.ndarray:
         raw = path.read_bytes()
     except OSError as exc:
         raise FormatError(f"{path}: cannot read: {exc}") from None
+    return decode_pfm(raw, str(path))
+
+
+def decode_pfm(raw: bytes, name: str = "PFM data") -> np.ndarray:
+    """PFM bytes → float32 HxW or HxWx3 (``name`` goes into error messages)."""
+    path = name
     match = _HEADER.match(raw[:256])
     if match is None:
         raise FormatError(f"{path}: not a PFM file (expected 'PF'/'Pf', width, height, scale header)")
@@ -47,6 +53,11 @@ def read_pfm(path: str | Path) -> np.ndarray:
 
 def write_pfm(path: str | Path, array: np.ndarray, *, little_endian: bool = True) -> None:
     """Write float HxW (gray) or HxWx3 (colour) data as PFM, in the chosen byte order."""
+    Path(path).write_bytes(encode_pfm(array, little_endian=little_endian))
+
+
+def encode_pfm(array: np.ndarray, *, little_endian: bool = True) -> bytes:
+    """Float HxW or HxWx3 → PFM bytes."""
     data = np.asarray(array)
     if not (np.issubdtype(data.dtype, np.floating) or np.issubdtype(data.dtype, np.integer)) or data.dtype == np.bool_:
         raise FormatError(f"PFM stores real numbers, got dtype {data.dtype}")
@@ -55,4 +66,4 @@ def write_pfm(path: str | Path, array: np.ndarray, *, little_endian: bool = True
     magic = "PF" if data.ndim == 3 else "Pf"
     dtype = np.dtype("<f4" if little_endian else ">f4")
     header = f"{magic}\n{data.shape[1]} {data.shape[0]}\n{-1.0 if little_endian else 1.0}\n".encode("ascii")
-    Path(path).write_bytes(header + np.ascontiguousarray(np.flipud(data), dtype=dtype).tobytes())
+    return header + np.ascontiguousarray(np.flipud(data), dtype=dtype).tobytes()

@@ -87,6 +87,9 @@ def save_annotation(frame_id: int) -> ResponseReturnValue:
     submit = bool(body.get("submit", True))
     ann = annotate.save_annotation(g.db, frame_id, current_user, version=version, regions=body.get("regions", []),
                                    illusion_type=body.get("illusion_type"), submit=submit)
+    if submit:
+        runtime().submit(g.db, "generate", {"frame_id": frame_id, "annotation_version": ann.version},
+                         g.db.get(User, current_user.id))
     g.db.commit()
     return {"frame_id": frame_id, "annotation_version": ann.version, "submitted": ann.submitted,
             "state": g.db.get(Frame, frame_id).state.value}

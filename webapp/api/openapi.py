@@ -46,6 +46,7 @@ def _q(name: str, typ: str = "integer", desc: str = "") -> dict[str, Any]:
 
 _ILLUSION_TYPES = [t.value for t in IllusionType]
 _JOB_ID = {"name": "job_id", "in": "path", "required": True, "schema": {"type": "integer"}}
+_SAMPLE_ID = {"name": "sample_id", "in": "path", "required": True, "schema": {"type": "integer"}}
 _FRAME_ID = {"name": "frame_id", "in": "path", "required": True, "schema": {"type": "integer"}}
 
 
@@ -100,6 +101,16 @@ def openapi_document() -> dict[str, Any]:
                 params=[_FRAME_ID], body="Propagate", ok="202", schema="Job")},
             "/review/bulk": {"post": _op("Review many frames; each item succeeds or fails on its own", "curator",
                                          body="BulkReview", schema="BulkResults")},
+            "/samples": {"get": _op("Generated samples with QA figures", "annotator", schema="SampleList",
+                                    params=[_q("state", "string", "generated, accepted, rejected"),
+                                            _q("flagged", "string", "true or false"), _q("limit"), _q("offset")])},
+            "/samples/{sample_id}": {"get": _op("One sample: files, parameters, provenance, QA", "annotator",
+                                                params=[_SAMPLE_ID], schema="Sample")},
+            "/samples/{sample_id}/review": {"post": _op(
+                "Accept (joins the dataset) or reject (back to annotators) a sample", "curator",
+                params=[_SAMPLE_ID], body="SampleDecision", schema="Sample")},
+            "/samples/{sample_id}/regenerate": {"post": _op("Generate the sample again (a job)", "curator",
+                                                            params=[_SAMPLE_ID], ok="202", schema="Job")},
             "/stats/funnel": {"get": _op("Pipeline funnel counts", "annotator", schema="Funnel")},
             "/jobs": {"get": _op("List jobs (annotators: their own)", "annotator", schema="JobList",
                                  params=[_q("state", "string"), _q("limit", desc="1..500, default 50")])},
@@ -160,6 +171,14 @@ def openapi_document() -> dict[str, Any]:
                         "id": {"type": "integer"}, "revision": {"type": "integer"}}}}}},
                 "BulkResults": {"type": "object", "properties": {"results": {"type": "array", "items": {"type": "object"}}}},
                 "JobList": _list("Job"),
+                "Sample": {"type": "object", "properties": {
+                    "id": {"type": "integer"}, "frame_id": {"type": "integer"},
+                    "state": {"enum": ["generated", "accepted", "rejected"]},
+                    "flagged": {"type": "boolean"}, "files": {"type": "object", "description": "output name → media key"},
+                    "params": {"type": "object"}, "provenance": {"type": "object"}, "qa": {"type": "object"}}},
+                "SampleList": _list("Sample"),
+                "SampleDecision": {"type": "object", "required": ["decision"], "properties": {
+                    "decision": {"enum": ["accept", "reject"]}, "reason": {"type": "string"}}},
                 "Lease": {"type": "object", "properties": {"frame_id": {"type": "integer"},
                                                            "lease_expires": {"type": "string", "format": "date-time"}}},
                 "FrameDetail": {"allOf": [_ref("Frame"), {"type": "object", "properties": {

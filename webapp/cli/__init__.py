@@ -10,6 +10,7 @@ from webapp.cli.bench import bench
 from webapp.cli.geometry import geometry
 from webapp.cli.ingest import frames, ingest, prefilter
 from webapp.cli.jobs import jobs, worker
+from webapp.cli.selftest import selftest
 from webapp.cli.state import CliState
 from webapp.cli.users import users
 from webapp.cli.workspace import demo, init, serve, synth
@@ -28,5 +29,5 @@ def main(ctx: click.Context, data_dir: Path | None) -> None:
     ctx.obj = CliState(data_dir)
 
 
-for command in (init, serve, worker, demo, synth, ingest, prefilter, frames, users, jobs, geometry, bench):
+for command in (init, serve, worker, demo, synth, ingest, prefilter, frames, users, jobs, geometry, bench, selftest):
     main.add_command(command)

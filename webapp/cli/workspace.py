@@ -11,11 +11,12 @@ import click
 from sqlalchemy import select
 
 from dataset.db import migrate, transaction
-from dataset.models import Role, User, Video
+from dataset.models import JobState, Role, User, Video
 from dataset.services import jobs as job_service
 from dataset.services import users as user_service
 from dataset.services.ingest import ingest_params
 from webapp.cli.state import CliState, pass_state
+from webapp.runtime import Runtime
 from webapp.settings import HOME_ENV, Settings, SettingsError, load_settings
 
 DEMO_DIR = Path("var/demo")
@@ -138,25 +139,49 @@ def demo(state: CliState, no_serve: bool, videos: int, host: str | None, port: i
                                                            prefilter=True), admin)
                 for p in video_dirs if str(p) not in imported]
 
+    if jobs:
+        _prepare_demo(rt)
     click.echo("\nDemo users (name / password):")
     for name, password in logins:
         click.echo(f"  {name:<10} {password}")
-
     if no_serve:
-        from webapp.jobs.handlers import HANDLERS
-
-        # The same code a worker runs, in this process, so the workspace is complete on exit.
-        for job_id, job_state in job_service.run_queued_jobs(HANDLERS, rt):
-            click.echo(f"job {job_id}: {job_state.value}")
         click.echo(f"\nworkspace ready at {settings.home}; run `illusion-studio --data-dir {settings.home} serve`")
         return
 
     env = {**os.environ, HOME_ENV: str(settings.home)}
     worker = subprocess.Popen([sys.executable, "-m", "webapp.cli", "worker"], env=env)
-    click.echo(f"worker started (pid {worker.pid}); ingesting and prefiltering {len(jobs)} videos in the background",
-               err=True)
+    click.echo(f"worker started (pid {worker.pid})", err=True)
     try:
         _serve(state, host, port, threads=8)
     finally:
         worker.terminate()
         worker.wait(timeout=30)
+
+
+def _prepare_demo(rt: Runtime) -> None:
+    """Ingest and prefilter the videos, review and annotate some frames, generate their samples.
+
+    Runs the jobs in this process (the same code a worker runs), so that every page has content
+    the moment the server starts.
+    """
+    from dataset.services.demo import seed_reviews_and_annotations
+    from webapp.jobs.handlers import HANDLERS
+
+    with click.progressbar(length=3, label="preparing the demo", file=sys.stderr) as bar:
+        _report_jobs(job_service.run_queued_jobs(HANDLERS, rt))
+        bar.update(1)
+        with transaction(rt.sessions) as s:
+            curator = s.scalar(select(User).where(User.name == Role.curator.value))
+            annotator = s.scalar(select(User).where(User.name == Role.annotator.value))
+            for frame_id in seed_reviews_and_annotations(s, rt.media, curator, annotator):
+                rt.submit(s, "generate", {"frame_id": frame_id}, annotator)
+        bar.update(1)
+        _report_jobs(job_service.run_queued_jobs(HANDLERS, rt))
+        bar.update(1)
+
+
+def _report_jobs(results: list[tuple[int, JobState]]) -> None:
+    for job_id, job_state in results:
+        if job_state != JobState.succeeded:
+            click.echo(f"job {job_id}: {job_state.value} (see `illusion-studio jobs show {job_id}`)", err=True)
+    click.echo(f"{sum(s == JobState.succeeded for _, s in results)} of {len(results)} jobs succeeded")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataset.services.annotate import encode_job, propagate_job
+from dataset.services.generate import generate_job
 from dataset.services.ingest import ingest_video
 from dataset.services.jobs import Handler
 from dataset.services.prefilter import prefilter_frames
@@ -12,4 +13,5 @@ HANDLERS: dict[str, Handler] = {
     "prefilter": prefilter_frames,
     "encode": encode_job,
     "propagate": propagate_job,
+    "generate": generate_job,
 }

@@ -76,6 +76,8 @@ class JobQueue:
                     log.exception("heartbeat failed")
 
         threading.Thread(target=beat, name="heartbeat", daemon=True).start()
+        # Said once a consumer thread is listening, so scripts (and tests) know when jobs will be taken.
+        self.huey.on_startup()(lambda: log.info("worker %s ready", me))
         consumer = self.huey.create_consumer(workers=concurrency, worker_type="thread", periodic=False,
                                              max_delay=1.0)
         try:

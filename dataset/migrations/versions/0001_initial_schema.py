@@ -2,7 +2,7 @@
 
 Revision ID: 0001
 Revises: 
-Create Date: 2026-11-21 23:53:20.618043
+Create Date: 2026-11-22 00:14:09.682094
 """
 
 from alembic import op
@@ -181,7 +181,8 @@ def upgrade() -> None:
     sa.Column('qa', sa.JSON(), nullable=False),
     sa.Column('created_at', sa.DateTime(), nullable=False),
     sa.ForeignKeyConstraint(['frame_id'], ['frames.id'], name=op.f('fk_samples_frame_id_frames'), ondelete='CASCADE'),
-    sa.PrimaryKeyConstraint('id', name=op.f('pk_samples'))
+    sa.PrimaryKeyConstraint('id', name=op.f('pk_samples')),
+    sa.UniqueConstraint('frame_id', 'annotation_version', name='uq_samples_frame_version')
     )
     with op.batch_alter_table('samples', schema=None) as batch_op:
         batch_op.create_index(batch_op.f('ix_samples_frame_id'), ['frame_id'], unique=False)

@@ -1,0 +1,50 @@
+"""The demo workspace's head start: some frames reviewed and annotated from their true masks.
+
+Synthetic frames carry exact masks of every illusion and its support, so the demo can show every
+page with content (approved frames, annotations, generated samples) while leaving work for a
+newcomer to do by hand in each role.
+"""
+
+from __future__ import annotations
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from annotation.segment import mask_to_rle
+from dataset.media import MediaStore
+from dataset.models import Frame, FrameState, User, Video
+from dataset.samples import load_output
+from dataset.services.annotate import save_annotation
+from dataset.services.review import review_frame
+
+APPROVE_PER_VIDEO = 6
+ANNOTATE_PER_VIDEO = 3
+
+
+def seed_reviews_and_annotations(session: Session, media: MediaStore, curator: User, annotator: User) -> list[int]:
+    """Approve the first frames of each synthetic video and annotate the first of those from their
+    true masks (submitted, so generation follows). Returns the annotated frame ids; idempotent."""
+    annotated = []
+    for video in session.scalars(select(Video).order_by(Video.id)):
+        if not video.meta.get("synthetic"):
+            continue
+        frames = session.scalars(select(Frame).where(Frame.video_id == video.id).order_by(Frame.index)
+                                 .limit(APPROVE_PER_VIDEO)).all()
+        for n, frame in enumerate(frames):
+            if frame.state == FrameState.prefiltered:
+                review_frame(session, frame.id, curator, "approve")
+            if n < ANNOTATE_PER_VIDEO and frame.state == FrameState.approved:
+                save_annotation(session, frame.id, annotator, version=0, regions=_true_regions(media, frame),
+                                illusion_type=video.meta["pairs"][0]["illusion_type"], submit=True)
+                annotated.append(frame.id)
+    return annotated
+
+
+def _true_regions(media: MediaStore, frame: Frame) -> list[dict[str, object]]:
+    regions = []
+    for name, key in sorted(frame.assets.items()):
+        kind, _, pair = name.partition("_")
+        if kind in ("illusion", "support") and pair.isdigit():
+            mask = load_output(media, key, "mask")
+            regions.append({"pair": int(pair), "kind": kind, "mask": mask_to_rle(mask), "clicks": [{"from": "ground truth"}]})
+    return regions

@@ -1,0 +1,211 @@
+"""The generation job: an annotated frame becomes a stereo training sample.
+
+Monocular disparity → plane rectification of every illusion/support pair → right-view synthesis
+(scale search, forward warp, inpainting) → QA figures (plane fits, holes, SGBM self-consistency)
+→ a :class:`Sample` with its outputs in the media store (names in ``dataset.samples``).
+Re-running for the same annotation version replaces that sample; the annotation is never touched.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import io
+import time
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from sqlalchemy import select
+
+from annotation.segment import rle_to_mask
+from dataset.db import transaction
+from dataset.geometry import (
+    GeometryError,
+    RegionMasks,
+    rectify_disparity,
+    stereo_consistency,
+    synthesize_right_view,
+)
+from dataset.media import MediaStore
+from dataset.models import Annotation, Frame, FrameState, RegionKind, Sample, SampleState, Video, utcnow
+from dataset.samples import load_output, mask_name, store_outputs
+from dataset.services.errors import Conflict, InvalidInput, NotFound
+from dataset.services.jobs import JobContext
+
+GENERATABLE = (FrameState.annotated, FrameState.generated, FrameState.accepted)
+
+
+class GenerationError(InvalidInput):
+    """A frame that cannot become a sample; the message says why and what to do."""
+
+
+@dataclass(frozen=True)
+class MonoDisparity:
+    """Where the generation's disparity comes from. ``scale`` is fixed when it is already in pixels."""
+
+    disparity: np.ndarray  # float32 HxW, larger = nearer
+    provenance: dict[str, Any]
+    scale: float | None = None
+
+
+def code_version() -> str:
+    try:
+        return importlib.metadata.version("illusion-studio")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"
+
+
+@lru_cache(maxsize=2)
+def _depth_model(model_path: str, device: str) -> Any:
+    # One model per process: Depth Anything loads once per worker.
+    from annotation.depth import make_depth_backend
+
+    return make_depth_backend("depth-anything-v2", model_path=Path(model_path), device=device)
+
+
+def mono_disparity(settings: Any, media: MediaStore, frame: Frame, video: Video, left: np.ndarray) -> MonoDisparity:
+    """The frame's monocular disparity, by the first source that applies:
+
+    an external reconstruction (px, scale fixed to 1) → Depth Anything V2 when configured (cached
+    per frame and model) → a disparity imported with the frame → a synthetic scene's recorded
+    mono-fooled disparity (labelled simulated).
+    """
+    assets = frame.assets
+    if "reconstruction_disparity" in assets:
+        return MonoDisparity(load_output(media, assets["reconstruction_disparity"], "disparity"),
+                             {"depth_backend": "reconstruction", "simulated": False, "units": "px"}, scale=1.0)
+    if settings.depth_backend == "depth-anything-v2":
+        if settings.depth_model_path is None:
+            raise GenerationError("depth_backend is depth-anything-v2 but depth_model_path is not set")
+        model = _depth_model(str(settings.depth_model_path), settings.device)
+        cache_key = f"mono:{model.model_id}"
+        if cache_key in assets:
+            disparity = load_output(media, assets[cache_key], "disparity_mono")
+        else:
+            disparity = model.estimate(left)
+        return MonoDisparity(disparity, {"depth_backend": "depth-anything-v2", "depth_model_id": model.model_id,
+                                         "simulated": False, "units": "relative", "cache_key": cache_key})
+    if "precomputed_disparity" in assets:
+        return MonoDisparity(load_output(media, assets["precomputed_disparity"], "disparity_mono"),
+                             {"depth_backend": "precomputed", "simulated": False, "units": "imported"})
+    if "mono_disparity" in assets and video.meta.get("synthetic"):
+        disparity = np.load(io.BytesIO(media.read_bytes(assets["mono_disparity"])))
+        return MonoDisparity(disparity.astype(np.float32),
+                             {"depth_backend": "synthetic", "simulated": True, "units": "px",
+                              "note": "recorded mono-fooled disparity of a synthetic scene, not a model's estimate"})
+    raise GenerationError(f"frame {frame.id} has no monocular disparity: set depth_backend = 'depth-anything-v2' "
+                          "with depth_model_path, or import precomputed disparities with the frames")
+
+
+def generate_job(ctx: JobContext) -> dict[str, Any]:
+    """Job ``generate``: params ``frame_id``, ``annotation_version``."""
+    started = time.process_time()
+    settings, media = ctx.settings, ctx.media
+    with ctx.sessions() as s:
+        frame = s.get(Frame, ctx.params["frame_id"])
+        if frame is None:
+            raise NotFound(f"no frame {ctx.params['frame_id']}")
+        if frame.state not in GENERATABLE:
+            raise Conflict(f"frame {frame.id} is {frame.state.value}; only annotated frames are generated")
+        video = s.get(Video, frame.video_id)
+        ann = s.scalar(select(Annotation).where(Annotation.frame_id == frame.id))
+        if ann is None or not ann.submitted:
+            raise GenerationError(f"frame {frame.id} has no submitted annotation")
+        version = ann.version
+        if ctx.params.get("annotation_version") not in (None, version):
+            ctx.log(f"annotation moved on to version {version} since this job was queued; generating that")
+        regions = [(r.pair, r.kind, r.mask_rle) for r in ann.regions]
+        illusion_type = ann.illusion_type.value if ann.illusion_type else None
+    left = load_output(media, frame.media_key, "left")
+    ctx.progress(0.1, "monocular disparity")
+    mono = mono_disparity(settings, media, frame, video, left)
+    pairs = _pairs(regions)
+    ctx.progress(0.3, f"rectifying {len(pairs)} pair(s)")
+    try:
+        rect = rectify_disparity(mono.disparity, [p for _, p in pairs], guide=left,
+                                 threshold=settings.plane_threshold, hypotheses=settings.plane_hypotheses,
+                                 seed=frame.id)
+        ctx.progress(0.5, "synthesizing the right view")
+        view = synthesize_right_view(left, rect.disparity, scale=mono.scale, tau=settings.right_view_tau,
+                                     inpaint=settings.inpaint_backend, lama_model=settings.lama_model_path)
+    except GeometryError as exc:
+        raise GenerationError(f"frame {frame.id}: {exc}") from None
+    disparity = (view.scale * rect.disparity).astype(np.float32)
+    ctx.progress(0.7, "quality checks")
+    check = stereo_consistency(left, view.image, disparity, ignore=view.holes)
+    qa = _qa(settings, rect.reports, view, check, [pair for pair, _ in pairs])
+    outputs: dict[str, Any] = {
+        "left": left, "right": view.image, "disparity": disparity, "disparity_rect": rect.disparity,
+        "disparity_mono": mono.disparity, "holes": view.holes,
+        "masks": {mask_name(kind, pair): mask for pair, p in pairs
+                  for kind, mask in (("illusion", p.illusion), ("support", p.support)) if mask is not None},
+    }
+    files = store_outputs(media, outputs)
+    params = {"scale": view.scale, "tau": settings.right_view_tau, "valid_ratio": view.valid_ratio,
+              "plane_threshold": settings.plane_threshold, "plane_hypotheses": settings.plane_hypotheses,
+              "inpaint": settings.inpaint_backend, "seed": frame.id}
+    provenance = {**mono.provenance, "source": "reconstruction" if mono.provenance["depth_backend"] == "reconstruction"
+                  else "synthesized", "illusion_type": illusion_type, "frame_id": frame.id, "video": video.name,
+                  "annotation_version": version, "code_version": code_version(), "generated_at": utcnow().isoformat() + "Z"}
+    qa["cpu_s"] = round(time.process_time() - started, 3)
+    with transaction(ctx.sessions) as s:
+        sample = s.scalar(select(Sample).where(Sample.frame_id == frame.id, Sample.annotation_version == version))
+        if sample is None:
+            sample = Sample(frame_id=frame.id, annotation_version=version)
+            s.add(sample)
+        sample.files, sample.params, sample.provenance, sample.qa = files, params, provenance, qa
+        sample.state, sample.flagged = SampleState.generated, bool(qa["flags"])
+        current = s.get(Frame, frame.id)
+        if current.state == FrameState.annotated:
+            current.state, current.revision = FrameState.generated, current.revision + 1
+        if "cache_key" in mono.provenance:  # keep the model's estimate for the next run
+            current.assets = {**current.assets, mono.provenance["cache_key"]: files["disparity_mono"]}
+        s.flush()
+        sample_id = sample.id
+    ctx.log(f"sample {sample_id}: scale {view.scale:.3f}, holes {qa['hole_fraction']:.1%}, SGBM EPE {check.epe:.2f} px"
+            + (f"; flagged: {', '.join(qa['flags'])}" if qa["flags"] else ""))
+    return {"sample_id": sample_id, "frame_id": frame.id, "flags": qa["flags"], "cpu_s": qa["cpu_s"]}
+
+
+def _pairs(regions: list[tuple[int, RegionKind, dict[str, Any]]]) -> list[tuple[int, RegionMasks]]:
+    masks: dict[int, dict[RegionKind, np.ndarray]] = {}
+    for pair, kind, rle in regions:
+        masks.setdefault(pair, {})[kind] = rle_to_mask(rle)
+    out = []
+    for pair in sorted(masks):
+        if RegionKind.illusion not in masks[pair]:
+            raise GenerationError(f"pair {pair} has no illusion region")
+        out.append((pair, RegionMasks(masks[pair][RegionKind.illusion], masks[pair].get(RegionKind.support))))
+    return out
+
+
+def _qa(settings: Any, reports: list[Any], view: Any, check: Any, pair_ids: list[int]) -> dict[str, Any]:
+    pairs = [{**r.as_dict(), "pair": pair} for r, pair in zip(reports, pair_ids, strict=True)]
+    for p in pairs:
+        p.pop("index", None)
+    hole_fraction = float(view.holes.mean())
+    flags = []
+    if hole_fraction > settings.qa_max_hole_fraction:
+        flags.append(f"holes {hole_fraction:.0%} > {settings.qa_max_hole_fraction:.0%}")
+    if not np.isfinite(check.epe) or check.epe > settings.qa_max_stereo_epe:
+        flags.append(f"SGBM EPE {check.epe:.2f} px > {settings.qa_max_stereo_epe:g}")
+    for p in pairs:
+        if p["status"] != "rectified":
+            flags.append(f"pair {p['pair']} {p['status']}: {p['reason']}")
+        elif p["inlier_ratio"] is not None and p["inlier_ratio"] < settings.qa_min_inlier_ratio:
+            flags.append(f"pair {p['pair']} inlier ratio {p['inlier_ratio']:.2f} < {settings.qa_min_inlier_ratio:g}")
+    return _finite({"pairs": pairs, "scale": view.scale, "hole_fraction": hole_fraction, "stereo_epe": check.epe,
+                    "stereo_bad2": check.bad2, "stereo_coverage": check.coverage, "flags": flags})
+
+
+def _finite(value: Any) -> Any:
+    """NaN and inf become None: JSON has no NaN, and PostgreSQL refuses it."""
+    if isinstance(value, float):
+        return value if np.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value

@@ -1,0 +1,53 @@
+"""Samples API: list and inspect generated samples, accept or reject them, regenerate."""
+
+from __future__ import annotations
+
+from flask import g, request
+from flask.typing import ResponseReturnValue
+from flask_login import current_user
+
+from dataset.models import Role, Sample, User
+from dataset.services import jobs as job_service
+from dataset.services import sample_review
+from dataset.services.errors import NotFound
+from webapp.api.blueprint import api, int_arg, json_body
+from webapp.app import runtime
+from webapp.auth import requires
+
+
+@api.get("/samples")
+@requires(Role.annotator)
+def list_samples() -> ResponseReturnValue:
+    flagged = request.args.get("flagged")
+    items, total = sample_review.list_samples(
+        g.db, state=request.args.get("state") or None,
+        flagged=None if flagged in (None, "") else flagged == "true",
+        limit=int_arg("limit", 60) or 60, offset=int_arg("offset", 0) or 0)
+    return {"items": items, "total": total}
+
+
+@api.get("/samples/<int:sample_id>")
+@requires(Role.annotator)
+def get_sample(sample_id: int) -> ResponseReturnValue:
+    return sample_review.get_sample(g.db, sample_id)
+
+
+@api.post("/samples/<int:sample_id>/review")
+@requires(Role.curator)
+def review_sample(sample_id: int) -> ResponseReturnValue:
+    body = json_body()
+    sample_review.review_sample(g.db, sample_id, current_user, str(body.get("decision", "")), str(body.get("reason", "")))
+    g.db.commit()
+    return sample_review.get_sample(g.db, sample_id)
+
+
+@api.post("/samples/<int:sample_id>/regenerate")
+@requires(Role.curator)
+def regenerate_sample(sample_id: int) -> ResponseReturnValue:
+    sample = g.db.get(Sample, sample_id)
+    if sample is None:
+        raise NotFound(f"no sample {sample_id}")
+    job = runtime().submit(g.db, "generate", {"frame_id": sample.frame_id, "annotation_version": sample.annotation_version},
+                           g.db.get(User, current_user.id))
+    g.db.commit()
+    return job_service.job_json(job), 202

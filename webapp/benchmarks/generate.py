@@ -1,0 +1,84 @@
+"""One 1080p sample end to end through the real generation job, timed in CPU seconds.
+
+Budget (DESIGN.md): ≤ 1 s of CPU per 1080p frame, model inference aside — the synthetic scene's
+recorded mono disparity stands in for the model. The reference is the same frame through the
+straightforward implementations of the authors' steps (batched RANSAC on all points, iterated
+scale search, ``np.maximum.at`` splat), measured in the same run.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from sqlalchemy import select, update
+
+from dataset.db import migrate, transaction
+from dataset.geometry.benchmark import reference_plane_fit, reference_right_view
+from dataset.models import Frame, FrameState, Job, Sample
+from dataset.services import jobs as job_service
+from dataset.services import users as user_service
+from dataset.services.annotate import save_annotation
+from dataset.services.demo import _true_regions
+from dataset.services.ingest import ingest_params
+from dataset.synthetic import read_video, write_synthetic_dataset
+from webapp.jobs.handlers import HANDLERS
+from webapp.runtime import Runtime
+from webapp.settings import load_settings
+
+
+def run_generate_bench(size: tuple[int, int] = (1920, 1080), repeats: int = 3) -> dict[str, Any]:
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        [scene] = write_synthetic_dataset(root / "scene", videos=1, seed=0, n_frames=1, width=size[0], height=size[1])
+        (root / "ws").mkdir()
+        rt = Runtime(load_settings(root / "ws"))
+        migrate(rt.settings.database_url)
+        with transaction(rt.sessions) as s:
+            rt.submit(s, "ingest", ingest_params(str(scene), fps=None, dedup_hamming=None), None)
+        job_service.run_queued_jobs(HANDLERS, rt)
+        with transaction(rt.sessions) as s:
+            s.execute(update(Frame).values(state=FrameState.approved))
+            frame = s.scalar(select(Frame))
+            user = user_service.create_user(s, "bench", "annotator", "bench-password")
+            save_annotation(s, frame.id, user, version=0, regions=_true_regions(rt.media, frame),
+                            illusion_type="picture", submit=True)
+            frame_id = frame.id
+        cpu, wall = [], []
+        for _ in range(repeats):
+            with transaction(rt.sessions) as s:
+                job_id = rt.submit(s, "generate", {"frame_id": frame_id}, None).id
+            started = time.perf_counter()
+            job_service.run_queued_jobs(HANDLERS, rt)
+            wall.append(time.perf_counter() - started)
+            with rt.sessions() as s:
+                job = s.get(Job, job_id)
+                if job.state.value != "succeeded":
+                    raise RuntimeError(f"generation failed: {job.error}")
+                cpu.append(job.result["cpu_s"])
+                qa = s.scalar(select(Sample)).qa
+        reference_ms = _reference_ms(scene)
+        rt.close()
+    return {"size": f"{size[0]}x{size[1]}", "generate_cpu_s": round(float(np.median(cpu)), 3),
+            "generate_wall_s": round(float(np.median(wall)), 3), "budget_cpu_s": 1.0,
+            "reference_steps_ms": reference_ms, "hole_fraction": round(qa["hole_fraction"], 4),
+            "stereo_epe": round(qa["stereo_epe"], 3), "repeats": repeats}
+
+
+def _reference_ms(scene: Path) -> dict[str, float]:
+    """The authors' straightforward steps on the same frame: plane fits on the support regions
+    and the right view (iterated scale search + ``np.maximum.at`` splat)."""
+    frame = read_video(scene).frames[0]
+    started = time.perf_counter()
+    for region in frame.regions:
+        v, u = np.nonzero(region.support)
+        d = frame.mono_disparity[v, u]
+        points = np.stack([u, v, (d - d.min()) / max(float(np.ptp(d)), 1e-6)], axis=1).astype(np.float32)
+        reference_plane_fit(points, threshold=0.01, hypotheses=1000, batch=10, seed=0)
+    plane_ms = (time.perf_counter() - started) * 1000
+    started = time.perf_counter()
+    reference_right_view(frame.left, frame.mono_disparity, tau=0.9)
+    return {"plane_fits_ms": round(plane_ms, 1), "right_view_ms": round((time.perf_counter() - started) * 1000, 1)}
