@@ -8,7 +8,6 @@ Re-running for the same annotation version replaces that sample; the annotation 
 
 from __future__ import annotations
 
-import importlib.metadata
 import io
 import time
 from dataclasses import dataclass
@@ -33,6 +32,7 @@ from dataset.models import Annotation, Frame, FrameState, RegionKind, Sample, Sa
 from dataset.samples import load_output, mask_name, store_outputs
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.jobs import JobContext
+from dataset.version import code_version
 
 GENERATABLE = (FrameState.annotated, FrameState.generated, FrameState.accepted)
 
@@ -48,13 +48,6 @@ class MonoDisparity:
     disparity: np.ndarray  # float32 HxW, larger = nearer
     provenance: dict[str, Any]
     scale: float | None = None
-
-
-def code_version() -> str:
-    try:
-        return importlib.metadata.version("illusion-studio")
-    except importlib.metadata.PackageNotFoundError:
-        return "unknown"
 
 
 @lru_cache(maxsize=2)

@@ -22,8 +22,8 @@ from dataset.models import Frame, IllusionType, SourceKind, Video
 from dataset.services.errors import InvalidInput
 from dataset.services.jobs import JobContext
 from dataset.services.prefilter import launch_prefilter
+from dataset.thumbnails import put_thumbnail
 
-THUMB_WIDTH = 320
 DEFAULT_FPS = 2.0  # the paper's sampling rate
 DEFAULT_DEDUP_HAMMING = 4
 
@@ -110,10 +110,8 @@ def _store_frame(ctx: JobContext, video_id: int, frame: DecodedFrame, phash: int
     # Compression level 1: ~3x faster than the default for ~10% larger files; frames are written once.
     png = frame.png or _encode(bgr, ".png", [cv2.IMWRITE_PNG_COMPRESSION, 1])
     height, width = frame.rgb.shape[:2]
-    thumb = cv2.resize(bgr, (THUMB_WIDTH, max(1, round(height * THUMB_WIDTH / width))), interpolation=cv2.INTER_AREA)
     # Media first, row last: a crash in between leaves an orphan file, never a row without its file.
-    assets: dict[str, Any] = {"thumb": ctx.media.put_bytes(_encode(thumb, ".jpg", [cv2.IMWRITE_JPEG_QUALITY, 85]), "jpg"),
-                              "dhash": f"{phash:016x}"}
+    assets: dict[str, Any] = {"thumb": put_thumbnail(ctx.media, frame.rgb), "dhash": f"{phash:016x}"}
     for name, path in frame.side_files.items():
         assets[name] = ctx.media.put_file(path)
     key = ctx.media.put_bytes(png, "png")

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from webapp.cli.bench import bench
+from webapp.cli.capture import import_capture, import_reconstruction
 from webapp.cli.geometry import geometry
 from webapp.cli.ingest import frames, ingest, prefilter
 from webapp.cli.jobs import jobs, worker
@@ -29,5 +30,6 @@ def main(ctx: click.Context, data_dir: Path | None) -> None:
     ctx.obj = CliState(data_dir)
 
 
-for command in (init, serve, worker, demo, synth, ingest, prefilter, frames, users, jobs, geometry, bench, selftest):
+for command in (init, serve, worker, demo, synth, ingest, prefilter, frames, users, jobs, geometry, bench, selftest,
+                import_capture, import_reconstruction):
     main.add_command(command)

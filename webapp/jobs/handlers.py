@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataset.capture import import_capture_job, import_reconstruction_job
 from dataset.services.annotate import encode_job, propagate_job
 from dataset.services.generate import generate_job
 from dataset.services.ingest import ingest_video
@@ -14,4 +15,6 @@ HANDLERS: dict[str, Handler] = {
     "encode": encode_job,
     "propagate": propagate_job,
     "generate": generate_job,
+    "import_capture": import_capture_job,
+    "import_reconstruction": import_reconstruction_job,
 }
