@@ -13,15 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from dataset.geometry import RegionMasks, rectify_disparity, stereo_consistency, synthesize_right_view
+from dataset.geometry import RegionMasks, psnr, rectify_disparity, stereo_consistency, synthesize_right_view
 from dataset.synthetic import render_video
-
-
-def psnr(a: np.ndarray, b: np.ndarray, where: np.ndarray) -> float:
-    """PSNR in dB of two uint8 images over the bool HxW mask ``where``."""
-    diff = a.astype(np.float64)[where] - b.astype(np.float64)[where]
-    mse = float(np.mean(diff**2)) if diff.size else float("nan")
-    return float("inf") if mse == 0 else 10 * np.log10(255.0**2 / mse)
 
 
 def run_selftest(seeds: tuple[int, ...] = (0, 1, 2), width: int = 640, height: int = 360) -> dict[str, Any]:

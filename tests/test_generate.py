@@ -177,3 +177,33 @@ def test_two_workers_generate_a_batch_without_doing_a_frame_twice(rt: Runtime, s
         assert len({j.worker for j in finished}) == 2
     with rt.sessions() as s:
         assert s.scalar(select(func.count()).select_from(Sample)) == 6
+
+
+def test_an_external_reconstruction_is_rectified_at_scale_one(runtime: Runtime, tmp_path: Path) -> None:
+    """A generated (mirror) video reconstructed elsewhere: its disparity is in pixels already, and its
+    rendered right view must agree with our warp outside the illusions."""
+    import shutil
+
+    from dataset.capture.reconstruction_import import reconstruction_params
+
+    scene = prepare(runtime, tmp_path, n_frames=1)
+    recon = tmp_path / "recon"
+    (recon / "disparity").mkdir(parents=True)
+    (recon / "right").mkdir()
+    np.save(recon / "disparity" / "frame_000000.npy", np.load(scene / "frames" / "000000" / "stereo_disparity.npy"))
+    shutil.copy(scene / "frames" / "000000" / "right.png", recon / "right" / "frame_000000.png")
+    with transaction(runtime.sessions) as s:
+        video_id = s.scalar(select(Frame.video_id))
+        runtime.submit(s, "import_reconstruction", reconstruction_params(s, video_id, recon), None)
+    job_service.run_queued_jobs(HANDLERS, runtime)
+    generate_all(runtime)
+    with runtime.sessions() as s:
+        sample = s.scalar(select(Sample))
+    assert sample.provenance["depth_backend"] == "reconstruction" and sample.provenance["source"] == "reconstruction"
+    assert sample.params["scale"] == 1.0
+    assert sample.qa["reconstruction_right_psnr_db"] > 30
+    out = load_outputs(runtime.media, sample.files)
+    truth = read_video(scene).frames[0]
+    mirror = out["masks"]["illusion_01"]
+    # the reflected room's virtual depth is gone: the mirror is flat glass again
+    assert np.abs(out["disparity"] - truth.disparity)[mirror].mean() < 0.05

@@ -59,3 +59,10 @@ def stereo_consistency(left: np.ndarray, right: np.ndarray, disparity: np.ndarra
     error = np.abs(matched[answered] - disp[answered])
     return Consistency(epe=float(error.mean()), bad2=float((error > 2.0).mean()),
                        coverage=float(answered.sum() / max(keep.sum(), 1)))
+
+
+def psnr(a: np.ndarray, b: np.ndarray, where: np.ndarray) -> float:
+    """PSNR in dB of two uint8 images over the bool HxW mask ``where`` (NaN when it is empty)."""
+    diff = a.astype(np.float64)[where] - b.astype(np.float64)[where]
+    mse = float(np.mean(diff**2)) if diff.size else float("nan")
+    return float("inf") if mse == 0 else float(10 * np.log10(255.0**2 / mse))

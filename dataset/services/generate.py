@@ -23,6 +23,7 @@ from dataset.db import transaction
 from dataset.geometry import (
     GeometryError,
     RegionMasks,
+    psnr,
     rectify_disparity,
     stereo_consistency,
     synthesize_right_view,
@@ -129,6 +130,12 @@ def generate_job(ctx: JobContext) -> dict[str, Any]:
     ctx.progress(0.7, "quality checks")
     check = stereo_consistency(left, view.image, disparity, ignore=view.holes)
     qa = _qa(settings, rect.reports, view, check, [pair for pair, _ in pairs])
+    if "reconstruction_right" in frame.assets:
+        # The reconstruction's own rendering should agree with our warp wherever the pairs left the
+        # disparity alone; a low figure means the imported disparity and rendering disagree.
+        rendered = load_output(media, frame.assets["reconstruction_right"], "right")
+        untouched = ~view.holes & ~np.any([p.illusion for _, p in pairs], axis=0)
+        qa["reconstruction_right_psnr_db"] = _finite(psnr(view.image, rendered, untouched))
     outputs: dict[str, Any] = {
         "left": left, "right": view.image, "disparity": disparity, "disparity_rect": rect.disparity,
         "disparity_mono": mono.disparity, "holes": view.holes,

@@ -1,0 +1,90 @@
+"""Which samples an export contains, read from the database into plain records.
+
+One sample per frame: among the samples in the chosen states, the one made from the newest
+annotation version (then the newest row). Videos get folder names that are stable across
+workspaces: a slug of the video's name, with a content-hash suffix only where two selected videos
+would share one.
+"""
+
+from __future__ import annotations
+
+import re
+from collections import defaultdict
+from collections.abc import Sequence
+from typing import Any
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from dataset.export.errors import LayoutError
+from dataset.export.records import SampleRecord, VideoInfo
+from dataset.models import Annotation, Frame, Sample, SampleState, Video
+
+DEFAULT_STATES = ("accepted",)
+
+
+def parse_states(states: Sequence[str]) -> list[str]:
+    """Validated sample states (``generated``, ``accepted``, ``rejected``), deduplicated, sorted."""
+    bad = [s for s in states if s not in SampleState.__members__]
+    if bad or not states:
+        raise LayoutError(f"unknown sample state {bad[0]!r}" if bad else "choose at least one sample state")
+    return sorted(set(states))
+
+
+def select_samples(session: Session, states: Sequence[str] = DEFAULT_STATES,
+                   video_ids: Sequence[int] | None = None) -> list[SampleRecord]:
+    """The samples to export, sorted by video folder and frame index."""
+    query = (select(Sample, Frame, Video, Annotation.illusion_type)
+             .join(Frame, Frame.id == Sample.frame_id).join(Video, Video.id == Frame.video_id)
+             .outerjoin(Annotation, Annotation.frame_id == Frame.id)
+             .where(Sample.state.in_([SampleState(s) for s in parse_states(states)])))
+    if video_ids:
+        query = query.where(Video.id.in_(list(video_ids)))
+    newest: dict[int, tuple[Sample, Frame, Video, Any]] = {}
+    for row in session.execute(query):
+        sample = row[0]
+        held = newest.get(sample.frame_id)
+        if held is None or _recency(sample) > _recency(held[0]):
+            newest[sample.frame_id] = tuple(row)  # type: ignore[assignment]
+    dirs = video_dirs({video.content_sha256: video.name for _, _, video, _ in newest.values()})
+    items = [_item(dirs[video.content_sha256], sample, frame, video, illusion_type)
+             for sample, frame, video, illusion_type in newest.values()]
+    return sorted(items, key=lambda item: (item.video_dir, item.index))
+
+
+def _recency(sample: Sample) -> tuple[int, int]:
+    return (sample.annotation_version if sample.annotation_version is not None else -1, sample.id)
+
+
+def _item(video_dir: str, sample: Sample, frame: Frame, video: Video, illusion_type: Any) -> SampleRecord:
+    return SampleRecord(
+        video_dir=video_dir,
+        video=VideoInfo(name=video.name, source_kind=video.source_kind.value, illusion_types=list(video.illusion_types),
+                        content_sha256=video.content_sha256, fps=video.fps, width=video.width, height=video.height,
+                        meta=dict(video.meta)),
+        index=frame.index, time_s=frame.time_s, width=frame.width, height=frame.height,
+        frame_state=frame.state.value, state=sample.state.value, flagged=sample.flagged,
+        annotation_version=sample.annotation_version,
+        illusion_type=illusion_type.value if illusion_type is not None else None,
+        files=dict(sample.files), params=dict(sample.params), provenance=dict(sample.provenance), qa=dict(sample.qa),
+        created_at=sample.created_at,
+    )
+
+
+def slug(name: str) -> str:
+    """A folder name for ``name``: ``[A-Za-z0-9._-]`` kept, runs of anything else become ``_``;
+    never hidden, never ``.``/``..``, at most 80 characters."""
+    cleaned = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._")[:80].strip("._")
+    return cleaned or "video"
+
+
+def video_dirs(names: dict[str, str]) -> dict[str, str]:
+    """Folder names for videos given as {content_sha256: name}; unique, and the same for the same
+    set of videos in any workspace (the hash suffix only disambiguates equal slugs)."""
+    by_slug: dict[str, list[str]] = defaultdict(list)
+    for sha, name in names.items():
+        by_slug[slug(name)].append(sha)
+    dirs = {sha: base if len(shas) == 1 else f"{base}-{sha[:12]}" for base, shas in by_slug.items() for sha in shas}
+    if len(set(dirs.values())) != len(dirs):
+        raise LayoutError("two videos map to the same export folder name; rename one of them")
+    return dirs
