@@ -152,6 +152,14 @@ class JobContext:
             self._pending_log.append(f"{time.strftime('%H:%M:%S')} {message}")
         self._flush(force=False)
 
+    def finish(self, message: str | None, progress: float | None = None) -> None:
+        """Write what is pending now (the job is about to end)."""
+        if message:
+            self._pending_log.append(message)
+        if progress is not None:
+            self._progress = progress
+        self._flush(force=True)
+
     def _flush(self, *, force: bool) -> None:
         now = time.monotonic()
         if not force and now - self._last_flush < 0.1:
@@ -194,15 +202,13 @@ def execute_job(job_id: int, handlers: dict[str, Handler], env: JobEnv) -> JobSt
             raise LookupError(f"no handler for job kind {kind!r}")
         result = handler(ctx)
     except Exception as exc:  # a job's failure is data for the user, not a worker crash
-        ctx._pending_log.append(traceback.format_exc())
-        ctx._flush(force=True)
+        ctx.finish(traceback.format_exc())
         with transaction(sessions) as s:
             job = s.get(Job, job_id)
             job.state, job.finished_at = JobState.failed, utcnow()
             job.error = f"{type(exc).__name__}: {exc}"
         return JobState.failed
-    ctx._progress = 1.0
-    ctx._flush(force=True)
+    ctx.finish(None, progress=1.0)
     with transaction(sessions) as s:
         job = s.get(Job, job_id)
         job.state, job.result, job.finished_at = JobState.succeeded, result, utcnow()
