@@ -20,6 +20,15 @@ _KEY = re.compile(r"^[0-9a-f]{2}/[0-9a-f]{2}/[0-9a-f]{64}\.[a-z0-9]{1,8}$")
 _EXT = re.compile(r"^[a-z0-9]{1,8}$")
 
 
+def sha256_file(path: Path) -> str:
+    """Hex SHA-256 of a file's bytes, read in chunks (files may be larger than memory)."""
+    digest = hashlib.sha256()
+    with Path(path).open("rb") as fh:
+        while chunk := fh.read(1 << 20):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
 class MediaKeyError(ValueError):
     """A key that is malformed or would leave the media root."""
 

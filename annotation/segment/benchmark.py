@@ -73,7 +73,7 @@ def bench_segmenter(segmenter: Segmenter, image: np.ndarray, truths: list[np.nda
             "rle_p50_ms": float(np.percentile(rle, 50))}
 
 
-def _default_sam2_dir(root: Path) -> Path:
+def default_sam2_dir(root: Path) -> Path:
     """A saved Sam2Model with the default (hiera-tiny) architecture and random weights."""
     import torch
     from transformers import Sam2Config, Sam2Model
@@ -94,7 +94,7 @@ def run_segment_bench(size: tuple[int, int] = (1920, 1080), clicks: int = 30,
     results = {"classical": bench_segmenter(make_segmenter("classical"), frame.left, truths, clicks)}
     if sam2:
         with tempfile.TemporaryDirectory() as tmp:
-            segmenter = make_segmenter("sam2", model_path=_default_sam2_dir(Path(tmp)))
+            segmenter = make_segmenter("sam2", model_path=default_sam2_dir(Path(tmp)))
             results["sam2"] = bench_segmenter(segmenter, frame.left, truths, clicks)
     return results
 

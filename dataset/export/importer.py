@@ -48,7 +48,9 @@ def add_sample(session: Session, media: MediaStore, record: SampleRecord) -> Out
     if record.annotation_version is not None and any(s.annotation_version == record.annotation_version
                                                      for s in samples):
         return "conflict"
-    if record.files.get("masks") and session.scalar(select(Annotation.id).where(Annotation.frame_id == frame.id)) is None:
+    # Only a sample made from an annotation brings one: curators review a sample against its version.
+    if (record.annotation_version is not None and record.files.get("masks")
+            and session.scalar(select(Annotation.id).where(Annotation.frame_id == frame.id)) is None):
         session.add(_annotation(media, frame.id, record))
     sample = Sample(frame_id=frame.id, annotation_version=record.annotation_version, state=SampleState(record.state),
                     flagged=record.flagged, files=record.files, params=record.params, provenance=record.provenance,
@@ -90,5 +92,5 @@ def _annotation(media: MediaStore, frame_id: int, record: SampleRecord) -> Annot
     for name, key in sorted(record.files["masks"].items()):
         kind, pair = parse_mask_name(name)
         regions.append(Region(pair=pair, kind=RegionKind(kind), mask_rle=mask_to_rle(load_output(media, key, "mask"))))
-    return Annotation(frame_id=frame_id, version=record.annotation_version or 1, submitted=True, regions=regions,
+    return Annotation(frame_id=frame_id, version=record.annotation_version, submitted=True, regions=regions,
                       illusion_type=IllusionType(record.illusion_type) if record.illusion_type else None)

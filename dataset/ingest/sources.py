@@ -18,6 +18,8 @@ from typing import Any, Protocol
 import cv2
 import numpy as np
 
+from dataset.media import sha256_file
+
 VIDEO_EXTENSIONS = frozenset({".mp4", ".mov", ".avi", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg", ".wmv", ".flv"})
 SCENE_FILE = "scene.json"
 # A decode that stops short of this share of the frames the container announces is a broken file.
@@ -64,14 +66,6 @@ def sampled(index: int, native_fps: float, fps: float | None) -> bool:
     return index == 0 or math.floor(index * fps / native_fps) > math.floor((index - 1) * fps / native_fps)
 
 
-def file_sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with path.open("rb") as fh:
-        while chunk := fh.read(1 << 20):
-            digest.update(chunk)
-    return digest.hexdigest()
-
-
 class VideoFileSource:
     """A video file decoded with OpenCV."""
 
@@ -93,7 +87,7 @@ class VideoFileSource:
         if not fps or not math.isfinite(fps) or fps <= 0:
             raise IngestError(f"{path}: the video reports no frame rate; re-encode it (e.g. ffmpeg -i IN -c:v libx264 OUT.mp4)")
         height, width = first.shape[:2]
-        self.info = SourceInfo("video", float(fps), max(count, 0), width, height, file_sha256(path))
+        self.info = SourceInfo("video", float(fps), max(count, 0), width, height, sha256_file(path))
 
     def frames(self, fps: float | None) -> Iterator[DecodedFrame]:
         cap = cv2.VideoCapture(str(self.path))
@@ -126,7 +120,7 @@ class SyntheticSceneSource:
             self.scene = json.loads((path / SCENE_FILE).read_text())
             frames = self.scene["frames"]
             digest = hashlib.sha256((path / SCENE_FILE).read_bytes())
-            digest.update(file_sha256(path / "video.mp4").encode())
+            digest.update(sha256_file(path / "video.mp4").encode())
         except (OSError, ValueError, KeyError) as exc:
             raise IngestError(f"{path}: not a readable synthetic scene ({exc})") from None
         if not frames:

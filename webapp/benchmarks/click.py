@@ -21,20 +21,16 @@ from typing import Any
 import cv2
 import httpx
 import numpy as np
-from sqlalchemy import select, update
 
 from annotation.segment import Embedding, mask_to_rle, rle_to_mask
-from annotation.segment.benchmark import _default_sam2_dir, person_click
-from dataset.db import migrate, transaction
-from dataset.models import Frame, FrameState
+from annotation.segment.benchmark import default_sam2_dir, person_click
+from dataset.db import transaction
+from dataset.models import Frame, User
 from dataset.services import annotate
-from dataset.services import jobs as job_service
 from dataset.services import users as user_service
-from dataset.services.ingest import ingest_params
 from dataset.synthetic import write_synthetic_dataset
-from webapp.jobs.handlers import HANDLERS
+from webapp.benchmarks.workspace import approved_frame_workspace
 from webapp.runtime import Runtime
-from webapp.settings import load_settings
 
 
 def _free_port() -> int:
@@ -44,18 +40,11 @@ def _free_port() -> int:
 
 
 def _workspace(root: Path, scene: Path, **settings: Any) -> tuple[Runtime, int, str]:
-    home = root / f"ws-{settings.get('segmenter', 'classical')}"
-    home.mkdir()
-    rt = Runtime(load_settings(home, **settings))
-    migrate(rt.settings.database_url)
+    rt, frame_id, user_id = approved_frame_workspace(root / f"ws-{settings.get('segmenter', 'classical')}", scene,
+                                                     **settings)
     with transaction(rt.sessions) as s:
-        rt.submit(s, "ingest", ingest_params(str(scene), fps=None, dedup_hamming=None), None)
-    job_service.run_queued_jobs(HANDLERS, rt)
-    with transaction(rt.sessions) as s:
-        s.execute(update(Frame).values(state=FrameState.approved))
-        frame = s.scalar(select(Frame))
-        token = user_service.issue_token(s, user_service.create_user(s, "bench", "annotator", "bench-password"))
-    return rt, frame.id, token
+        token = user_service.issue_token(s, s.get(User, user_id))
+    return rt, frame_id, token
 
 
 def _bench_backend(rt: Runtime, frame_id: int, token: str, truths: list[np.ndarray], clicks: int) -> dict[str, float]:
@@ -136,7 +125,7 @@ def run_click_bench(clicks: int = 30, size: tuple[int, int] = (1920, 1080), sam2
         results["classical"] = _bench_backend(rt, frame_id, token, truths, clicks)
         rt.close()
         if sam2:
-            model_dir = _default_sam2_dir(root / "sam2-tiny-random")
+            model_dir = default_sam2_dir(root / "sam2-tiny-random")
             rt, frame_id, token = _workspace(root, scene, segmenter="sam2", sam2_model_path=model_dir)
             results["sam2"] = _bench_backend(rt, frame_id, token, truths, clicks)
             rt.close()

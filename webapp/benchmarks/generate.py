@@ -14,39 +14,28 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from sqlalchemy import select, update
+from sqlalchemy import select
 
-from dataset.db import migrate, transaction
+from dataset.db import transaction
 from dataset.geometry.benchmark import reference_plane_fit, reference_right_view
-from dataset.models import Frame, FrameState, Job, Sample
+from dataset.models import Frame, Job, Sample, User
 from dataset.services import jobs as job_service
-from dataset.services import users as user_service
 from dataset.services.annotate import save_annotation
 from dataset.services.demo import _true_regions
-from dataset.services.ingest import ingest_params
 from dataset.synthetic import read_video, write_synthetic_dataset
+from webapp.benchmarks.workspace import approved_frame_workspace
 from webapp.jobs.handlers import HANDLERS
-from webapp.runtime import Runtime
-from webapp.settings import load_settings
 
 
 def run_generate_bench(size: tuple[int, int] = (1920, 1080), repeats: int = 3) -> dict[str, Any]:
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         [scene] = write_synthetic_dataset(root / "scene", videos=1, seed=0, n_frames=1, width=size[0], height=size[1])
-        (root / "ws").mkdir()
-        rt = Runtime(load_settings(root / "ws"))
-        migrate(rt.settings.database_url)
+        rt, frame_id, user_id = approved_frame_workspace(root / "ws", scene)
         with transaction(rt.sessions) as s:
-            rt.submit(s, "ingest", ingest_params(str(scene), fps=None, dedup_hamming=None), None)
-        job_service.run_queued_jobs(HANDLERS, rt)
-        with transaction(rt.sessions) as s:
-            s.execute(update(Frame).values(state=FrameState.approved))
-            frame = s.scalar(select(Frame))
-            user = user_service.create_user(s, "bench", "annotator", "bench-password")
-            save_annotation(s, frame.id, user, version=0, regions=_true_regions(rt.media, frame),
+            frame = s.get(Frame, frame_id)
+            save_annotation(s, frame_id, s.get(User, user_id), version=0, regions=_true_regions(rt.media, frame),
                             illusion_type="picture", submit=True)
-            frame_id = frame.id
         cpu, wall = [], []
         for _ in range(repeats):
             with transaction(rt.sessions) as s:
