@@ -11,9 +11,9 @@ from tests.browser import running_demo
 pytestmark = pytest.mark.browser
 
 NAV = {
-    "annotator": ["dashboard", "annotate", "frames", "jobs"],
-    "curator": ["dashboard", "annotate", "frames", "review", "ingest", "jobs"],
-    "admin": ["dashboard", "annotate", "frames", "review", "ingest", "jobs", "users"],
+    "annotator": ["dashboard", "annotate", "frames", "samples", "jobs"],
+    "curator": ["dashboard", "annotate", "frames", "review", "samples", "ingest", "jobs"],
+    "admin": ["dashboard", "annotate", "frames", "review", "samples", "ingest", "jobs", "users"],
 }
 
 

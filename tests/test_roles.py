@@ -23,6 +23,13 @@ EXPECTED: dict[str, Role | None] = {
     "pages.review": Role.curator,
     "pages.ingest": Role.curator,
     "pages.users": Role.admin,
+    "samples.index": Role.annotator,
+    "samples.detail": Role.annotator,
+    "samples.preview": Role.annotator,
+    "samples.render": Role.annotator,
+    "samples.scene": Role.annotator,
+    "samples.viser_client": Role.annotator,
+    "samples.frame_preview": Role.annotator,
     "pages.create_user": Role.admin,
     "media.serve": Role.annotator,
     "api.openapi": Role.annotator,
@@ -53,7 +60,8 @@ EXPECTED: dict[str, Role | None] = {
     "api.review_sample": Role.curator,
     "api.regenerate_sample": Role.curator,
 }
-SAMPLE_ARGS = {"job_id": "1", "frame_id": "1", "sample_id": "1", "key": "ab/cd/" + "ab" * 32 + ".png"}
+SAMPLE_ARGS = {"job_id": "1", "frame_id": "1", "sample_id": "1", "view": "anaglyph", "asset": "index.html",
+               "key": "ab/cd/" + "ab" * 32 + ".png"}
 CALLERS = ["anonymous", *(r.value for r in Role)]
 
 

@@ -47,9 +47,11 @@ def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
     from webapp.api import api
     from webapp.views.media import media
     from webapp.views.pages import pages
+    from webapp.views.samples import samples
 
     app.register_blueprint(pages)
     app.register_blueprint(media)
+    app.register_blueprint(samples)
     app.register_blueprint(api, url_prefix="/api/v1")
     _register_errors(app)
     return app

@@ -162,7 +162,8 @@ def _store_testing(info: VideoInfo, index: int, shape: tuple[int, int], paths: d
     files = store_outputs(media, {"disparity": np.where(valid, disp, np.float32(np.nan)), "valid": valid,
                                   "masks": {"illusion_00": read_mask(mask)}})
     files.update(left=media.put_file(paths["left"]), right=media.put_file(paths["right"]))
-    return _record(info, index, shape, files, annotated=True, params={"scale": 1.0},
+    # like a capture imported here: its mask is evaluation data, not an annotation
+    return _record(info, index, shape, files, annotated=False, params={"scale": 1.0},
                    provenance={"source": "capture", "imported_from": "authors", "authors": names})
 
 

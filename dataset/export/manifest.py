@@ -14,7 +14,7 @@ from typing import Any
 
 from dataset.export.errors import LayoutError
 from dataset.models import FrameState, IllusionType, SampleState, SourceKind
-from dataset.services.generate import code_version
+from dataset.version import code_version
 
 FORMAT = "illusion-studio/native"
 FORMAT_VERSION = 1

@@ -22,8 +22,8 @@ class IllusionStereoDataset(Dataset[Item]):
 
     - ``left``, ``right``: float32 3xHxW in [0, 1] (RGB);
     - ``disparity``: float32 1xHxW, pixels, the training target (NaN and inf → 0);
-    - ``valid``: bool 1xHxW, finite disparity ∧ not a hole of the synthesized right view ∧ the
-      sample's valid mask (captures);
+    - ``valid``: bool 1xHxW, finite disparity ∧ the sample's valid mask (captures). Right-view
+      holes do not enter: they are in right-view pixels, and every left pixel keeps its disparity;
     - ``illusion``: bool 1xHxW, the union of the sample's illusion masks;
     - ``meta``: {"id", "video", "index", "scale"} (str, str, int, float: default collation works).
 
@@ -48,8 +48,6 @@ class IllusionStereoDataset(Dataset[Item]):
         disparity = read_pfm(self._path(files["disparity"]))
         finite = np.isfinite(disparity)
         valid = finite.copy()
-        if "holes" in files:
-            valid &= ~read_mask(self._path(files["holes"]))
         if "valid" in files:
             valid &= read_mask(self._path(files["valid"]))
         illusion = np.zeros_like(valid)

@@ -11,6 +11,16 @@ from dataset.models import Annotation, Frame, FrameState, Sample, SampleState, U
 from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 
+# What curators most often find wrong with a generated sample (the reject reason picker).
+REJECT_REASONS = ("surface not flat", "mask misses the illusion", "wrong support region", "bad right view",
+                  "not an illusion")
+
+
+def newest_sample_id(session: Session, frame_id: int) -> int | None:
+    """The sample of the frame's newest annotation version."""
+    return session.scalar(select(Sample.id).where(Sample.frame_id == frame_id)
+                          .order_by(Sample.annotation_version.desc().nulls_last(), Sample.id.desc()).limit(1))
+
 
 def sample_json(sample: Sample, frame: Frame, video: Video) -> dict[str, Any]:
     return {

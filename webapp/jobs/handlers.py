@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataset.capture import import_capture_job, import_reconstruction_job
+from dataset.export.jobs import export_job, import_job
 from dataset.services.annotate import encode_job, propagate_job
 from dataset.services.generate import generate_job
 from dataset.services.ingest import ingest_video
@@ -17,4 +18,6 @@ HANDLERS: dict[str, Handler] = {
     "generate": generate_job,
     "import_capture": import_capture_job,
     "import_reconstruction": import_reconstruction_job,
+    "export": export_job,
+    "import": import_job,
 }

@@ -1,0 +1,42 @@
+// Accept/reject of one sample, shared by the samples grid and the sample page.
+import { api } from "./api.js";
+
+// POSTs the decision to the sample's API URL; resolves to the updated sample.
+export function review(sampleUrl, decision, reason = "") {
+  return api(`${sampleUrl}/review`, { method: "POST", body: { decision, reason } });
+}
+
+// The reason picker dialog: `pick(label)` resolves to the chosen reason, or "" when cancelled.
+// Keys 1–N choose while it is open.
+export function reasonPicker(dialog) {
+  const reasons = [...dialog.querySelectorAll("button.reason")].map((b) => b.value);
+  dialog.addEventListener("keydown", (event) => {
+    const reason = reasons[Number(event.key) - 1];
+    if (!reason) return;
+    event.preventDefault();
+    dialog.close(reason);
+  });
+  return (label) => {
+    dialog.querySelector("#reason-target").textContent = label;
+    dialog.returnValue = "";
+    dialog.showModal();
+    return new Promise((resolve) => dialog.addEventListener("close", () => resolve(dialog.returnValue), { once: true }));
+  };
+}
+
+// The few QA figures a curator scans first, formatted: [[label, value, title, flagged]].
+export function keyFigures(sample) {
+  const qa = sample.qa ?? {};
+  const flags = qa.flags ?? [];
+  const flagged = (prefix) => flags.some((f) => f.startsWith(prefix));
+  const pct = (v) => (v == null ? "–" : `${(100 * v).toFixed(1)} %`);
+  const num = (v, unit = "") => (v == null ? "–" : `${Number(v.toPrecision(3))}${unit}`);
+  const inliers = (qa.pairs ?? []).map((p) => p.inlier_ratio).filter((v) => v != null);
+  return [
+    ["holes", pct(qa.hole_fraction), "share of the right view inpainted", flagged("holes")],
+    ["EPE", num(qa.stereo_epe, " px"), "SGBM end-point error on the synthesized pair", flagged("SGBM EPE")],
+    ["inliers", inliers.length ? num(Math.min(...inliers)) : "–", "lowest plane-fit inlier ratio over the pairs",
+     flagged("pair ")],
+    ["scale", num(qa.scale ?? sample.params?.scale), "px per unit of monocular disparity", false],
+  ];
+}

@@ -1,0 +1,272 @@
+// The samples grid: keyboard-first accept/reject of generated samples, filters, paging, and a way
+// into each sample's page and 3D preview. Decisions run one after another, in key order.
+import { api, el } from "./api.js";
+import { keyFigures, reasonPicker, review } from "./sample_review.js";
+
+const $ = (id) => document.getElementById(id);
+const root = $("samples");
+const grid = $("samples-grid");
+const filters = $("sample-filters");
+const help = $("help");
+const picker = $("reason-picker");
+const pickReason = reasonPicker(picker);
+const canReview = root.dataset.canReview === "true";
+const pages = root.dataset.pages;  // /samples
+
+const PAGE = 48;
+const THUMBS = ["masks", "disparity_after", "anaglyph"];
+const STEPS = { ArrowLeft: "left", h: "left", ArrowRight: "right", l: "right", ArrowUp: "up", k: "up",
+                ArrowDown: "down", j: "down" };
+
+const view = { items: [], total: 0, offset: 0, focus: 0 };
+const mine = new Map();  // sample id → the state this session's decisions left it in
+let queue = Promise.resolve();
+
+function enqueue(task) {
+  queue = queue.then(task).catch((err) => say(err.message, "error"));
+  return queue;
+}
+
+// ---- data -------------------------------------------------------------------------------------
+
+function query() {
+  const f = filters.elements;
+  const params = new URLSearchParams({ limit: PAGE, offset: view.offset });
+  if (f.state.value !== "all") params.set("state", f.state.value);
+  if (f.flagged.value) params.set("flagged", f.flagged.value);
+  return params;
+}
+
+async function load(focusId) {
+  const page = await api(`${root.dataset.list}?${query()}`);
+  Object.assign(view, { items: page.items, total: page.total });
+  view.focus = Math.max(0, view.items.findIndex((s) => s.id === focusId));
+  grid.replaceChildren(...page.items.map((s) => renderTile(el("li", { className: "tile", role: "listitem" }), s)));
+  if (!page.items.length) {
+    grid.append(el("li", { className: "empty" },
+                   "No samples here. Samples appear when annotated frames have been generated (see Jobs)."));
+  }
+  $("samples-range").textContent = page.total
+    ? `${view.offset + 1}–${view.offset + page.items.length} of ${page.total}` : "0 of 0";
+  $("prev-page").disabled = view.offset === 0;
+  $("next-page").disabled = view.offset + page.items.length >= page.total;
+  history.replaceState(null, "", address());
+  paint();
+  focusTile();
+}
+
+// Filters, page and focus live in the address, so Back from a sample page lands where one left.
+function address() {
+  const f = filters.elements;
+  const params = new URLSearchParams();
+  if (f.state.value !== "generated") params.set("state", f.state.value);
+  if (f.flagged.value) params.set("flagged", f.flagged.value);
+  if (f.thumb.value !== THUMBS[0]) params.set("thumb", f.thumb.value);
+  if (view.offset) params.set("offset", view.offset);
+  const focused = view.items[view.focus];
+  if (focused && view.focus) params.set("focus", focused.id);
+  return params.size ? `?${params}` : location.pathname;
+}
+
+// ---- decisions --------------------------------------------------------------------------------
+
+async function decide(decision) {
+  const sample = view.items[view.focus];
+  if (!sample) return;
+  if (!canReview) return say("Only curators accept or reject samples.", "error");
+  const reason = decision === "reject" ? await pickReason(`sample #${sample.id}`) : "";
+  if (decision === "reject" && !reason) return focusTile();
+  moveTo(view.focus + 1);  // on at once: the curator never waits for the server between two keys
+  const tile = tileOf(sample.id);
+  tile?.classList.add("busy");
+  enqueue(async () => {
+    try {
+      const updated = await review(`${root.dataset.list}/${sample.id}`, decision, reason);
+      update(updated);
+      tally(updated);
+      say(decision === "accept" ? `Accepted #${sample.id}.` : `Rejected #${sample.id}: ${reason}.`);
+    } catch (err) {
+      tile?.classList.add("conflict");
+      throw err;
+    } finally {
+      tile?.classList.remove("busy");
+    }
+  });
+}
+
+function update(sample) {
+  const i = view.items.findIndex((s) => s.id === sample.id);
+  if (i < 0) return;
+  view.items[i] = sample;
+  renderTile(tileOf(sample.id), sample);
+  paint();
+}
+
+function tally(sample) {
+  mine.set(sample.id, sample.state);
+  const count = (state) => [...mine.values()].filter((v) => v === state).length;
+  $("count-accepted").textContent = count("accepted");
+  $("count-rejected").textContent = count("rejected");
+}
+
+// ---- focus and paging -------------------------------------------------------------------------
+
+function moveTo(index) {
+  if (!view.items.length) return;
+  view.focus = Math.min(Math.max(index, 0), view.items.length - 1);
+  paint();
+  focusTile();
+  history.replaceState(null, "", address());
+}
+
+function step(direction) {
+  const columns = getComputedStyle(grid).gridTemplateColumns.split(" ").length;
+  moveTo(view.focus + { left: -1, right: 1, up: -columns, down: columns }[direction]);
+}
+
+function page(direction) {
+  enqueue(async () => {
+    if (direction > 0) {
+      if (view.offset + view.items.length >= view.total) return say("This is the last page.");
+      // Decided samples have left the filter: the next page starts after the ones still in it.
+      view.offset += view.items.filter(inFilter).length;
+    } else {
+      if (view.offset === 0) return say("This is the first page.");
+      view.offset = Math.max(0, view.offset - PAGE);
+    }
+    await load();
+  });
+}
+
+function open(suffix = "") {
+  const sample = view.items[view.focus];
+  if (sample) location.assign(`${pages}/${sample.id}${suffix}`);
+}
+
+function cycleThumbs() {
+  const select = filters.elements.thumb;
+  select.value = THUMBS[(THUMBS.indexOf(select.value) + 1) % THUMBS.length];
+  showThumbs();
+}
+
+function showThumbs() {
+  view.items.forEach((s) => renderTile(tileOf(s.id), s));
+  history.replaceState(null, "", address());
+  focusTile();
+}
+
+function focusTile() {
+  const node = grid.children[view.focus];
+  if (!node?.classList.contains("tile")) return;
+  node.focus({ preventScroll: true });
+  node.scrollIntoView({ block: "nearest" });
+}
+
+// ---- rendering --------------------------------------------------------------------------------
+
+const inFilter = (s) => ["all", s.state].includes(filters.elements.state.value)
+  && (!filters.elements.flagged.value || String(s.flagged) === filters.elements.flagged.value);
+const tileOf = (id) => grid.querySelector(`.tile[data-id="${id}"]`);
+
+function paint() {
+  [...grid.querySelectorAll(".tile")].forEach((node, i) => {
+    node.classList.toggle("focused", i === view.focus);
+    node.tabIndex = i === view.focus ? 0 : -1;
+  });
+}
+
+function renderTile(node, sample) {
+  const thumb = filters.elements.thumb.value;
+  node.dataset.id = sample.id;
+  node.dataset.state = sample.state;
+  node.classList.toggle("settled", !inFilter(sample));
+  node.classList.toggle("flagged", sample.flagged);
+  node.ariaLabel = `Sample ${sample.id}, ${sample.video} frame ${sample.index}, ${sample.state}`
+    + (sample.flagged ? `, flagged: ${sample.qa.flags.join("; ")}` : "");
+  node.replaceChildren(
+    el("div", { className: "thumb" },
+       el("img", { src: `${pages}/${sample.id}/views/${thumb}.png?size=thumb`, loading: "lazy", alt: "",
+                   width: 384, height: Math.round(384 * sample.height / sample.width) }),
+       el("span", { className: `badge state ${sample.state}` }, sample.state),
+       sample.flagged ? el("span", { className: "badge flagged", title: sample.qa.flags.join("\n") }, "⚑ flagged") : ""),
+    el("div", { className: "meta" },
+       el("a", { href: `${pages}/${sample.id}`, tabIndex: -1 }, el("strong", {}, `#${sample.id}`)),
+       ` ${sample.video} · frame ${sample.index} · ${sample.time_s.toFixed(1)} s`),
+    el("dl", { className: "metrics" }, ...keyFigures(sample).map(([label, value, title, flagged]) =>
+      el("div", { title, className: flagged ? "flagged" : "" }, el("dt", {}, label), el("dd", {}, value)))),
+    sample.qa.flags?.length ? el("p", { className: "flags" }, sample.qa.flags.join(" · ")) : "",
+  );
+  return node;
+}
+
+function say(text, kind = "info") {
+  const line = $("samples-status");
+  line.textContent = text;
+  line.dataset.kind = kind;
+}
+
+// ---- input ------------------------------------------------------------------------------------
+
+const COMMANDS = {
+  a: () => decide("accept"), r: () => decide("reject"), x: () => decide("reject"),
+  Enter: () => open(), v: () => open("/preview"), d: cycleThumbs,
+  n: () => page(1), "]": () => page(1), p: () => page(-1), "[": () => page(-1),
+  Home: () => moveTo(0), End: () => moveTo(view.items.length - 1),
+  "?": () => help.showModal(),
+};
+
+document.addEventListener("keydown", (event) => {
+  if (picker.open) return;  // its own keys
+  if (help.open) {
+    if (event.key === "?") help.close();
+    return;
+  }
+  const target = event.target;
+  if (target.closest("input, select, textarea")) {
+    if (event.key === "Escape") focusTile();
+    return;
+  }
+  if (["Enter", " "].includes(event.key) && target.closest("button, a, summary")) return;  // let them press
+  if (event.ctrlKey || event.metaKey || event.altKey) return;
+  const key = event.key.length === 1 ? event.key.toLowerCase() : event.key;
+  const run = STEPS[key] ? () => step(STEPS[key]) : COMMANDS[key];
+  if (!run) return;
+  event.preventDefault();
+  run();
+});
+
+grid.addEventListener("click", (event) => {
+  const node = event.target.closest(".tile");
+  if (node) moveTo([...grid.children].indexOf(node));
+});
+grid.addEventListener("dblclick", (event) => event.target.closest(".tile") && open());
+help.addEventListener("close", focusTile);
+
+// Toolbar buttons act like their keys, then hand the keyboard back to the grid.
+const BUTTONS = { "open": () => open(), "open-3d": () => open("/preview"), "accept": () => decide("accept"),
+                  "reject": () => decide("reject"), "prev-page": () => page(-1), "next-page": () => page(1),
+                  "help-button": () => help.showModal() };
+for (const [id, run] of Object.entries(BUTTONS)) {
+  $(id)?.addEventListener("click", async () => {
+    await run();
+    if (!help.open && !picker.open) focusTile();
+  });
+}
+
+filters.addEventListener("change", (event) => {
+  if (event.target.name === "thumb") return showThumbs();
+  view.offset = 0;
+  enqueue(() => load());
+});
+
+function restore() {
+  const params = new URLSearchParams(location.search);
+  for (const name of ["state", "flagged", "thumb"]) {
+    if (params.has(name)) filters.elements[name].value = params.get(name);
+  }
+  view.offset = Math.max(0, Number(params.get("offset")) || 0);
+  return Number(params.get("focus")) || undefined;
+}
+
+const focusId = restore();
+enqueue(() => load(focusId));
