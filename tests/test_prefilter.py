@@ -164,3 +164,20 @@ def test_workers_share_the_backlog_without_asking_twice(rt: Runtime, start_worke
     assert all(j.attempts == 1 for j in finished)
     assert vlm.request_count - before == 24
     assert states(rt) == ["prefiltered"] * 24
+
+
+def test_the_keep_rule_comes_from_settings(tmp_path: Path, vlm: LocalVLMServer) -> None:
+    """A lab that doesn't care about corner watermarks drops the veto; one that wants only screens
+    (Q5) narrows keep_any_of."""
+    from dataset.db import migrate
+
+    settings = make_settings(tmp_path / "ws", vlm_backend="openai", vlm_base_url=vlm.base_url, vlm_model="rule-test",
+                             vlm_keep_any_of=(5,))
+    migrate(settings.database_url)
+    runtime = Runtime(settings)
+    ingest(runtime, write_video(tmp_path / "v.avi", [200, 200]))
+    with transaction(runtime.sessions) as s:
+        launch_prefilter(s, runtime.submit, None)
+    job_service.run_queued_jobs(HANDLERS, runtime)
+    assert states(runtime) == ["rejected", "rejected"]  # the answers say Q2 yes, but only Q5 counts now
+    runtime.close()

@@ -50,6 +50,11 @@ class Settings(BaseSettings):
     vlm_model: str = "Qwen2-VL-72B-Instruct"
     vlm_api_key: str = ""
     vlm_model_path: Path | None = None
+    # The keep rule (1-based question numbers; the authors' by default): keep if any of
+    # keep_any_of is yes, and not (veto[0] yes and veto[1] no), and none of keep_none_of is yes.
+    vlm_keep_any_of: tuple[int, ...] = (1, 2, 3, 4, 5, 6)
+    vlm_keep_veto: tuple[int, int] | None = (7, 8)
+    vlm_keep_none_of: tuple[int, ...] = (9, 10, 11, 12)
     # Generation (the authors' defaults) and the QA thresholds that flag a sample for a closer look.
     plane_threshold: float = Field(0.01, gt=0, description="RANSAC inlier threshold on min-max normalised disparity.")
     plane_hypotheses: int = Field(1000, ge=10)

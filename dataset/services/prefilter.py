@@ -19,7 +19,7 @@ import numpy as np
 from sqlalchemy import or_, select
 from sqlalchemy.orm import Session
 
-from annotation.vlm import PrefilterBackend, Verdict, make_backend, sparse_expand, sparse_samples, sparse_step
+from annotation.vlm import KeepRule, PrefilterBackend, Verdict, make_backend, sparse_expand, sparse_samples, sparse_step
 from dataset.db import transaction
 from dataset.models import Frame, FrameState, Job, JobState, PrefilterResult, User, Video, utcnow
 from dataset.services.errors import InvalidInput
@@ -64,17 +64,20 @@ def launch_prefilter(session: Session, submit: Submit, user: User | None, *, vid
 
 
 @lru_cache(maxsize=4)
-def _backend(name: str, base_url: str, model: str, api_key: str, model_path: str | None, device: str) -> PrefilterBackend:
+def _backend(name: str, base_url: str, model: str, api_key: str, model_path: str | None, device: str,
+             rule: KeepRule) -> PrefilterBackend:
     # One instance per configuration and process: a transformers model loads once per worker.
     return make_backend(name, base_url=base_url, model=model, api_key=api_key,
-                        model_path=Path(model_path) if model_path else None, device=device)
+                        model_path=Path(model_path) if model_path else None, device=device, rule=rule)
 
 
 def backend_for(settings: Any, params: dict[str, Any]) -> PrefilterBackend:
     try:
+        rule = KeepRule(any_of=tuple(settings.vlm_keep_any_of), none_of=tuple(settings.vlm_keep_none_of),
+                        veto_pair=tuple(settings.vlm_keep_veto) if settings.vlm_keep_veto else None)
         return _backend(params.get("backend") or settings.vlm_backend, params.get("base_url") or settings.vlm_base_url,
                         params.get("model") or settings.vlm_model, settings.vlm_api_key,
-                        str(settings.vlm_model_path) if settings.vlm_model_path else None, settings.device)
+                        str(settings.vlm_model_path) if settings.vlm_model_path else None, settings.device, rule)
     except ValueError as exc:
         raise InvalidInput(str(exc)) from None
 
