@@ -26,7 +26,8 @@ def test_login_logout_and_wrong_password(client) -> None:  # type: ignore[no-unt
 
 def test_login_redirects_only_within_the_site(client) -> None:  # type: ignore[no-untyped-def]
     token = csrf_from(client.get("/login").get_data(as_text=True))
-    for target, expected in (("/jobs", "/jobs"), ("https://evil.example/", "/"), ("//evil.example", "/")):
+    for target, expected in (("/jobs", "/jobs"), ("https://evil.example/", "/"), ("//evil.example", "/"),
+                             ("/%5Cevil.example", "/"), ("/\\evil.example", "/"), ("/%09/evil.example", "/")):
         response = client.post(f"/login?next={target}", data={"name": "admin", "password": "correct-horse-battery",
                                                               "csrf_token": token})
         assert response.location == expected
@@ -68,6 +69,11 @@ def test_api_errors_are_json(client, tokens) -> None:  # type: ignore[no-untyped
         (client.get("/api/v1/jobs/999", headers=auth), 404, "no job"),
         (client.get("/api/v1/nothing-here", headers=auth), 404, ""),
         (client.post("/api/v1/jobs/999/retry", headers=auth), 404, "no job"),
+        (client.get("/api/v1/jobs?state=bogus", headers=auth), 400, "state must be one of"),
+        (client.post("/api/v1/prefilter", json={"video_id": "abc"}, headers=auth), 400, "integer"),
+        (client.post("/api/v1/prefilter", json={"backend": "gpt"}, headers=auth), 400, "backend must be"),
+        (client.post("/api/v1/frames/1/review", json={"decision": "approve", "revision": "x"}, headers=auth), 400,
+         "revision must be"),
     ]
     for response, status, message in cases:
         assert response.status_code == status and response.is_json, (response.status_code, response.data)

@@ -205,3 +205,16 @@ def test_cli_queues_for_a_worker(fresh: Runtime, tmp_path: Path, monkeypatch: py
     assert counts(fresh)["Sample"] == 0
     result = runner.invoke(main, [*home, "worker", "--burst"])
     assert result.exit_code == 0 and "succeeded" in result.output and counts(fresh)["Sample"] == 2
+
+
+def test_an_index_naming_files_outside_the_dataset_is_refused(tmp_path: Path) -> None:
+    from dataset.export.authors_import import _within
+    from dataset.export.errors import LayoutError
+
+    root = tmp_path / "theirs"
+    root.mkdir()
+    assert _within(root, {"left": root / "a" / "b.png"}, "x")
+    with pytest.raises(LayoutError, match="leaves the dataset folder"):
+        _within(root, {"left": root / "video_frame_sequence" / ".." / ".." / "secret.png"}, "scale_factors.csv line 3")
+    with pytest.raises(LayoutError, match="leaves the dataset folder"):
+        _within(root, {"left": Path("/etc/passwd")}, "testing_enter.pkl entry")

@@ -115,3 +115,25 @@ def test_review_api(client, runtime, tokens) -> None:  # type: ignore[no-untyped
     assert client.get("/api/v1/stats/funnel", headers=curator).json["approved"] == 3
     annotator = {"Authorization": f"Bearer {tokens['annotator']}"}
     assert client.post(f"/api/v1/frames/{ids[0]}/review", headers=annotator, json={"decision": "approve"}).status_code == 403
+
+
+def test_a_decision_on_a_stale_read_is_refused_and_overwrites_nothing(sessions) -> None:  # type: ignore[no-untyped-def]
+    """Two curators load the same frame; the second to decide gets a conflict, not a silent overwrite."""
+    from dataset.services.frames import update_frame
+
+    with transaction(sessions) as s:
+        ids = seed_frames(s, n=1)
+        curator = user_service.create_user(s, "cu", "curator", "long-enough")
+    slow = sessions()
+    stale = slow.get(Frame, ids[0])  # curator A has the page open at revision 1
+    with transaction(sessions) as s:
+        review_service.review_frame(s, ids[0], curator, "reject", "blurry", revision=1)  # curator B is quicker
+    with pytest.raises(Conflict):
+        review_service.review_frame(slow, ids[0], curator, "approve", revision=1)
+    with pytest.raises(Conflict):  # the write itself is a compare-and-swap on the revision
+        update_frame(slow, stale, state=FrameState.approved)
+    slow.rollback()
+    slow.close()
+    with sessions() as s:
+        frame = s.get(Frame, ids[0])
+        assert (frame.state, frame.revision) == (FrameState.rejected, 2)

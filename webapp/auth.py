@@ -93,7 +93,8 @@ def init_auth(app: Flask) -> None:
         user = user_service.user_for_token(g.db, token.strip())
         if user is None:
             return None
-        g.db.commit()  # keep the token's last-used time
+        if g.db.dirty:
+            g.db.commit()  # keep the token's last-used time
         return SessionUser(user, via_token=True)
 
     @app.before_request

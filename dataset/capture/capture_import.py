@@ -91,7 +91,9 @@ def import_capture_job(ctx: JobContext) -> dict[str, Any]:
                 _import_frame(ctx, video_id, index, frame, calibration, reference)
                 new += 1
             ctx.progress((index + 1) / len(frames), f"frame {frame.stem}")
-    except Exception:
+    except CaptureError:
+        # Bad input: nothing of it stays. Any other failure (a locked database, a full disk) keeps
+        # what was imported, for the retry to finish.
         with transaction(ctx.sessions) as s:
             s.execute(delete(Video).where(Video.id == video_id))  # frames and samples go with it (ON DELETE CASCADE)
         raise

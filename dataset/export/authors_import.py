@@ -70,6 +70,15 @@ def read_authors(root: Path, progress: Progress) -> list[PendingSample]:
 
 # --- training frames -------------------------------------------------------------------------
 
+def _within(root: Path, paths: dict[str, Path], what: str) -> dict[str, Path]:
+    """The paths, if every one stays inside the dataset folder (an index could name any file)."""
+    top = root.resolve()
+    for path in paths.values():
+        if not path.resolve().is_relative_to(top):
+            raise LayoutError(f"{what}: {path} leaves the dataset folder {root}")
+    return paths
+
+
 def _training(root: Path, right_entry: str, scale: float) -> Any:
     """Check one CSV line's files; returns the function that stores them."""
     parts = PurePosixPath(right_entry.replace("\\", "/")).parts
@@ -81,7 +90,8 @@ def _training(root: Path, right_entry: str, scale: float) -> Any:
     if frame is None:
         raise LayoutError(f"{root / SCALES}: {right_entry!r}: frame files are named frame_<number>.png")
     rel = Path(video, title, name)
-    paths = {"left": root / LEFT / rel, "right": root / RIGHT / rel, "depth": root / DEPTH / rel}
+    paths = _within(root, {"left": root / LEFT / rel, "right": root / RIGHT / rel, "depth": root / DEPTH / rel},
+                    f"{SCALES} line {right_entry!r}")
     masks = _masks(root / MASKS / video / title, stem)
     height, width = _check_files(paths, {"left": 3, "right": 3, "depth": 1}, masks, f"{SCALES} line {right_entry!r}")
     info = VideoInfo(name=f"{video}/{title}", source_kind="web", illusion_types=[],
@@ -144,7 +154,7 @@ def _testing(root: Path, entry: dict[str, str], key: tuple[str, str, str]) -> An
     if not frame_id.isdigit():
         raise LayoutError(f"{root / TESTING_INDEX}: frame id {frame_id!r} of {scene}/{obj} is not a number")
     base = next((root / t for t in TESTING_ROOTS if (root / t / entry["left"]).is_file()), root / TESTING)
-    paths = {part: base / entry[part] for part in TESTING_PARTS}
+    paths = _within(root, {part: base / entry[part] for part in TESTING_PARTS}, f"{TESTING_INDEX} entry {key}")
     mask = paths.pop("mask")
     height, width = _check_files(paths, {"left": 3, "right": 3, "disp": 1}, {"illusion_00": [mask]},
                                  f"{TESTING_INDEX} entry {key}")

@@ -37,8 +37,14 @@ def staged_dir(out: Path, *, tag: str, overwrite: bool = False) -> Iterator[Path
 
 def check_target(out: Path, *, overwrite: bool) -> None:
     """Refuse an ``out`` that exists and is not an empty folder (unless ``overwrite`` and a folder)."""
-    if out.exists() and not (out.is_dir() and (overwrite or not any(out.iterdir()))):
-        raise LayoutError(f"{out} already exists and is not an empty folder; choose another path or overwrite it")
+    if not out.exists() or (out.is_dir() and not any(out.iterdir())):
+        return
+    # --overwrite replaces an earlier export only: never a folder that merely happens to be there.
+    earlier_export = (out / "manifest.json").is_file() or (out / "meta_data" / "scale_factors.csv").is_file()
+    if not (overwrite and out.is_dir() and earlier_export):
+        raise LayoutError(f"{out} already exists and is not an empty folder"
+                          + ("" if overwrite else "; choose another path or overwrite an earlier export")
+                          + (" (nor an earlier export, so it is not overwritten)" if overwrite else ""))
 
 
 def _replace(staging: Path, out: Path, tag: str) -> None:

@@ -13,11 +13,14 @@ from collections.abc import Sequence
 from datetime import datetime, timedelta
 from functools import lru_cache
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import cv2
 import numpy as np
 from sqlalchemy import or_, select, update
+from sqlalchemy.dialects.postgresql import insert as postgresql_insert
+from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 from sqlalchemy.orm import Session
 
 from annotation.segment import Embedding, EmbeddingCache, Segmenter, SegmentError, make_segmenter, mask_to_rle, rle_to_mask
@@ -27,9 +30,10 @@ from dataset.media import MediaStore
 from dataset.models import Annotation, Frame, FrameState, IllusionType, Region, RegionKind, User, utcnow
 from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
+from dataset.services.frames import update_frame
 from dataset.services.jobs import JobContext
 
-ANNOTATABLE = (FrameState.approved, FrameState.annotated)
+ANNOTATABLE = (FrameState.approved,)
 DELETE_REASONS = ("redundant", "imperceptible")
 PREFETCH = 5  # frames ahead of an annotator whose embeddings workers prepare
 
@@ -68,9 +72,7 @@ def next_frame(session: Session, user: User | Any, lease_s: int) -> tuple[Frame,
 def _lease(session: Session, frame_id: int, user: User | Any, lease_s: int, now: datetime) -> tuple[Frame, datetime] | None:
     """Take or renew the lease with one conditional UPDATE, so two annotators can't both win a frame."""
     expires = now + timedelta(seconds=lease_s)
-    if session.scalar(select(Annotation.id).where(Annotation.frame_id == frame_id)) is None:
-        with session.begin_nested():
-            session.add(Annotation(frame_id=frame_id))
+    _ensure_annotation_row(session, frame_id)
     taken = session.execute(
         update(Annotation)
         .where(Annotation.frame_id == frame_id,
@@ -81,6 +83,19 @@ def _lease(session: Session, frame_id: int, user: User | Any, lease_s: int, now:
     if taken != 1:
         return None
     return session.get(Frame, frame_id), expires
+
+
+def _ensure_annotation_row(session: Session, frame_id: int) -> None:
+    """Create the frame's annotation row unless it exists; two annotators racing here both succeed."""
+    insert = {"sqlite": sqlite_insert, "postgresql": postgresql_insert}[session.get_bind().dialect.name]
+    session.execute(insert(Annotation).values(frame_id=frame_id, version=0, submitted=False,
+                                              created_at=utcnow(), updated_at=utcnow())
+                    .on_conflict_do_nothing(index_elements=["frame_id"]))
+
+
+def _held_by_other(ann: Annotation, user: User | Any) -> bool:
+    return (ann.lease_user_id not in (None, user.id) and ann.lease_expires_at is not None
+            and ann.lease_expires_at > utcnow())
 
 
 def renew_lease(session: Session, frame_id: int, user: User | Any, lease_s: int) -> datetime:
@@ -123,8 +138,7 @@ def frame_detail(session: Session, frame_id: int, user: User | Any) -> dict[str,
                                  .order_by(Frame.index)).all()
     ids = [i for i, _ in neighbours]
     pos = ids.index(frame.id) if frame.id in ids else -1
-    held_by_other = (ann is not None and ann.lease_user_id not in (None, user.id)
-                     and ann.lease_expires_at is not None and ann.lease_expires_at > utcnow())
+    held_by_other = ann is not None and _held_by_other(ann, user)
     return {
         "id": frame.id, "video_id": frame.video_id, "index": frame.index, "time_s": frame.time_s,
         "width": frame.width, "height": frame.height, "state": frame.state.value, "revision": frame.revision,
@@ -153,30 +167,32 @@ def save_annotation(session: Session, frame_id: int, user: User | Any, *, versio
         raise NotFound(f"no frame {frame_id}")
     if frame.state not in ANNOTATABLE:
         raise Conflict(f"frame {frame_id} is {frame.state.value}; only approved frames can be annotated")
+    _ensure_annotation_row(session, frame_id)
     ann = session.scalar(select(Annotation).where(Annotation.frame_id == frame_id).with_for_update())
-    if ann is None:
-        ann = Annotation(frame_id=frame_id, version=0)
-        session.add(ann)
-        session.flush()
+    stale = Conflict(f"the annotation of frame {frame_id} changed since you loaded it (version {version}, "
+                     f"now {ann.version}); reload to see it")
     if version != ann.version:
-        raise Conflict(f"the annotation of frame {frame_id} changed since you loaded it (version {version}, "
-                       f"now {ann.version}); reload to see it")
-    if ann.lease_user_id not in (None, user.id) and ann.lease_expires_at and ann.lease_expires_at > utcnow():
+        raise stale
+    if _held_by_other(ann, user):
         raise Conflict(f"frame {frame_id} is being annotated by someone else")
     kind = _parse_type(illusion_type) if illusion_type else None
     parsed = _parse_regions(regions, frame.height, frame.width, require_illusion=submit)
     if submit and kind is None:
         raise InvalidInput("choose the illusion type (" + ", ".join(IllusionType) + ") before submitting")
+    # Compare-and-swap on the version: of two saves from the same version, exactly one wins.
+    won = session.execute(update(Annotation).where(Annotation.id == ann.id, Annotation.version == version)
+                          .values(version=Annotation.version + 1, user_id=user.id, illusion_type=kind,
+                                  submitted=submit, updated_at=utcnow())
+                          .execution_options(synchronize_session=False)).rowcount
+    if won != 1:
+        raise stale
+    session.refresh(ann)
     ann.regions.clear()
     session.flush()  # the unique (annotation, pair, kind) rows go before the new ones arrive
     ann.regions.extend(parsed)
-    ann.illusion_type, ann.user_id, ann.version = kind, user.id, ann.version + 1
-    ann.updated_at = utcnow()
     if submit:
-        ann.submitted = True
         ann.lease_user_id = ann.lease_expires_at = None
-        frame.state = FrameState.annotated
-        frame.revision += 1
+        update_frame(session, frame, state=FrameState.annotated)
         audit.record(session, user.id, "annotation.submit", "frame", frame.id, version=ann.version,
                      pairs=sorted({r.pair for r in parsed}), illusion_type=kind.value)
     session.flush()
@@ -232,8 +248,11 @@ def delete_frame(session: Session, frame_id: int, user: User | Any, reason: str)
         raise NotFound(f"no frame {frame_id}")
     if frame.state not in ANNOTATABLE:
         raise Conflict(f"frame {frame_id} is {frame.state.value}; only approved frames can be deleted here")
+    ann = session.scalar(select(Annotation).where(Annotation.frame_id == frame_id))
+    if ann is not None and _held_by_other(ann, user):
+        raise Conflict(f"frame {frame_id} is being annotated by someone else")
     before = frame.state
-    frame.state, frame.revision = FrameState.deleted, frame.revision + 1
+    update_frame(session, frame, state=FrameState.deleted)
     release_lease(session, frame_id, user)
     audit.record(session, user.id, "annotation.delete", "frame", frame.id, reason=reason, before=before.value)
     return frame
@@ -362,20 +381,23 @@ def propagate_job(ctx: JobContext) -> dict[str, Any]:
     written, skipped = [], []
     for frame, propagated in zip(following, masks, strict=True):
         with transaction(ctx.sessions) as s:
+            _ensure_annotation_row(s, frame.id)
             ann = s.scalar(select(Annotation).where(Annotation.frame_id == frame.id).with_for_update())
-            if ann is None:
-                ann = Annotation(frame_id=frame.id, version=0)
-                s.add(ann)
-                s.flush()
-            held = ann.lease_user_id not in (None, p.get("user_id")) and ann.lease_expires_at and ann.lease_expires_at > utcnow()
-            if ann.submitted or held:
+            if ann.submitted or _held_by_other(ann, SimpleNamespace(id=p.get("user_id"))):
                 skipped.append(frame.id)
                 continue
+            # The same compare-and-swap as a person's save: a save that lands meanwhile wins.
+            won = s.execute(update(Annotation).where(Annotation.id == ann.id, Annotation.version == ann.version)
+                            .values(version=Annotation.version + 1, updated_at=utcnow())
+                            .execution_options(synchronize_session=False)).rowcount
+            if won != 1:
+                skipped.append(frame.id)
+                continue
+            s.refresh(ann)
             for region in [r for r in ann.regions if r.pair == p["pair"] and r.kind == kind]:
                 ann.regions.remove(region)
             s.flush()
             ann.regions.append(Region(pair=p["pair"], kind=kind, mask_rle=mask_to_rle(propagated),
                                       clicks=[{"propagated_from": start.id}]))
-            ann.version += 1
             written.append(frame.id)
     return {"frames": written, "skipped": skipped, "areas": [int(m.sum()) for m in masks]}

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from typing import Any
 
-from sqlalchemy import func, select
+from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
-from dataset.models import Frame, FrameState, PrefilterResult, Video
-from dataset.services.errors import InvalidInput
+from dataset.models import Frame, FrameState, PrefilterResult, Video, utcnow
+from dataset.services.errors import Conflict, InvalidInput
 
 # Which states count as having reached each funnel stage (rejected/deleted frames drop out).
 _REACHED: dict[str, tuple[FrameState, ...]] = {
@@ -30,6 +30,20 @@ def funnel_counts(session: Session) -> dict[str, int]:
     for stage, states in _REACHED.items():
         counts[stage] = sum(by_state.get(s, 0) for s in states)
     return counts
+
+
+def update_frame(session: Session, frame: Frame, **values: Any) -> None:
+    """Write ``values`` to ``frame`` and bump its revision, only if nobody changed it since it was read.
+
+    One compare-and-swap UPDATE: correct on SQLite and PostgreSQL alike, whatever the isolation
+    level, so two people (or a person and a job) never silently overwrite each other.
+    """
+    done = session.execute(update(Frame).where(Frame.id == frame.id, Frame.revision == frame.revision)
+                           .values(revision=Frame.revision + 1, updated_at=utcnow(), **values)
+                           .execution_options(synchronize_session=False)).rowcount
+    if done != 1:
+        raise Conflict(f"frame {frame.id} changed meanwhile; reload it and try again")
+    session.refresh(frame)
 
 
 def parse_state(value: str) -> FrameState:

@@ -32,6 +32,7 @@ from dataset.media import MediaStore
 from dataset.models import Annotation, Frame, FrameState, RegionKind, Sample, SampleState, Video, utcnow
 from dataset.samples import load_output, mask_name, store_outputs
 from dataset.services.errors import Conflict, InvalidInput, NotFound
+from dataset.services.frames import update_frame
 from dataset.services.jobs import JobContext
 from dataset.version import code_version
 
@@ -143,9 +144,9 @@ def generate_job(ctx: JobContext) -> dict[str, Any]:
                   for kind, mask in (("illusion", p.illusion), ("support", p.support)) if mask is not None},
     }
     files = store_outputs(media, outputs)
-    params = {"scale": view.scale, "tau": settings.right_view_tau, "valid_ratio": view.valid_ratio,
+    params = _finite({"scale": view.scale, "tau": settings.right_view_tau, "valid_ratio": view.valid_ratio,
               "plane_threshold": settings.plane_threshold, "plane_hypotheses": settings.plane_hypotheses,
-              "inpaint": settings.inpaint_backend, "seed": frame.id}
+              "inpaint": settings.inpaint_backend, "seed": frame.id})
     provenance = {**mono.provenance, "source": "reconstruction" if mono.provenance["depth_backend"] == "reconstruction"
                   else "synthesized", "illusion_type": illusion_type, "frame_id": frame.id, "video": video.name,
                   "annotation_version": version, "code_version": code_version(), "generated_at": utcnow().isoformat() + "Z"}
@@ -158,10 +159,10 @@ def generate_job(ctx: JobContext) -> dict[str, Any]:
         sample.files, sample.params, sample.provenance, sample.qa = files, params, provenance, qa
         sample.state, sample.flagged = SampleState.generated, bool(qa["flags"])
         current = s.get(Frame, frame.id)
-        if current.state == FrameState.annotated:
-            current.state, current.revision = FrameState.generated, current.revision + 1
         if "cache_key" in mono.provenance:  # keep the model's estimate for the next run
             current.assets = {**current.assets, mono.provenance["cache_key"]: files["disparity_mono"]}
+        if current.state != FrameState.generated:  # a regenerated accepted sample needs a new look
+            update_frame(s, current, state=FrameState.generated)
         s.flush()
         sample_id = sample.id
     ctx.log(f"sample {sample_id}: scale {view.scale:.3f}, holes {qa['hole_fraction']:.1%}, SGBM EPE {check.epe:.2f} px"

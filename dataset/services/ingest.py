@@ -95,13 +95,11 @@ def ingest_video(ctx: JobContext) -> dict[str, Any]:
     if kept == 0:
         raise IngestError(f"{p['path']}: no frames could be decoded")
     with transaction(ctx.sessions) as s:
+        # One transaction: a crash can't leave a complete video whose prefilter was never queued.
         video = s.get(Video, video_id)
         video.meta = {**video.meta, "ingest": "complete", "frames": kept, "dropped_duplicates": dropped}
-    ctx.log(f"kept {kept} frames ({new} new), dropped {dropped} near-duplicates")
-    if p.get("prefilter"):
-        with transaction(ctx.sessions) as s:
-            jobs = launch_prefilter(s, ctx.env.submit, None, video_id=video_id)
-        ctx.log(f"queued {len(jobs)} prefilter jobs")
+        jobs = launch_prefilter(s, ctx.env.submit, None, video_id=video_id) if p.get("prefilter") else []
+    ctx.log(f"kept {kept} frames ({new} new), dropped {dropped} near-duplicates; queued {len(jobs)} prefilter jobs")
     return {"video_id": video_id, "frames": kept, "new_frames": new, "dropped_duplicates": dropped}
 
 

@@ -188,11 +188,14 @@ def execute_job(job_id: int, handlers: dict[str, Handler], env: JobEnv) -> JobSt
     me = worker_id()
     sessions = env.sessions
     with transaction(sessions) as s:
+        # Claim with one conditional UPDATE: of two workers handed the same id, exactly one runs it.
+        claimed = s.execute(update(Job).where(Job.id == job_id, Job.state == JobState.queued)
+                            .values(state=JobState.running, worker=me, attempts=Job.attempts + 1,
+                                    started_at=utcnow(), heartbeat_at=utcnow())
+                            .execution_options(synchronize_session=False)).rowcount
         job = s.get(Job, job_id)
-        if job is None or job.state != JobState.queued:
+        if not claimed:
             return job.state if job else JobState.failed
-        job.state, job.worker, job.attempts = JobState.running, me, job.attempts + 1
-        job.started_at = job.heartbeat_at = utcnow()
         job.log += f"--- attempt {job.attempts} on {me}\n"
         kind, params = job.kind, dict(job.params)
     ctx = JobContext(job_id, params, env)
@@ -203,16 +206,17 @@ def execute_job(job_id: int, handlers: dict[str, Handler], env: JobEnv) -> JobSt
         result = handler(ctx)
     except Exception as exc:  # a job's failure is data for the user, not a worker crash
         ctx.finish(traceback.format_exc())
-        with transaction(sessions) as s:
-            job = s.get(Job, job_id)
-            job.state, job.finished_at = JobState.failed, utcnow()
-            job.error = f"{type(exc).__name__}: {exc}"
-        return JobState.failed
+        return _finish(sessions, job_id, me, state=JobState.failed, error=f"{type(exc).__name__}: {exc}")
     ctx.finish(None, progress=1.0)
+    return _finish(sessions, job_id, me, state=JobState.succeeded, result=result)
+
+
+def _finish(sessions: sessionmaker[Session], job_id: int, me: str, **values: Any) -> JobState:
+    """Record the outcome, unless the job was taken from this worker meanwhile (reaped and retried)."""
     with transaction(sessions) as s:
-        job = s.get(Job, job_id)
-        job.state, job.result, job.finished_at = JobState.succeeded, result, utcnow()
-    return JobState.succeeded
+        s.execute(update(Job).where(Job.id == job_id, Job.worker == me, Job.state == JobState.running)
+                  .values(finished_at=utcnow(), **values).execution_options(synchronize_session=False))
+        return s.get(Job, job_id).state
 
 
 def run_queued_jobs(handlers: dict[str, Handler], env: JobEnv) -> list[tuple[int, JobState]]:

@@ -21,8 +21,9 @@ from sqlalchemy.orm import Session
 
 from annotation.vlm import KeepRule, PrefilterBackend, Verdict, make_backend, sparse_expand, sparse_samples, sparse_step
 from dataset.db import transaction
-from dataset.models import Frame, FrameState, Job, JobState, PrefilterResult, User, Video, utcnow
-from dataset.services.errors import InvalidInput
+from dataset.models import Frame, FrameState, Job, JobState, PrefilterResult, User, Video
+from dataset.services.errors import Conflict, InvalidInput
+from dataset.services.frames import update_frame
 from dataset.services.jobs import JobContext
 
 Submit = Callable[[Session, str, dict[str, Any], User | None], Job]
@@ -142,6 +143,10 @@ def _record(ctx: JobContext, backend: PrefilterBackend, verdicts: dict[int, Verd
             frame = s.get(Frame, frame_id, with_for_update=True)
             if frame is None or frame.state != FrameState.ingested:
                 continue  # deleted or moved on by a person meanwhile: their decision stands
+            try:
+                update_frame(s, frame, state=FrameState.rejected if v.keep is False else FrameState.prefiltered)
+            except Conflict:
+                continue  # changed by someone between our read and our write: theirs stands too
             metrics = dict(v.metrics)
             if frame_id in sparse_from:
                 metrics["sparse_step"] = sparse_from[frame_id]
@@ -150,9 +155,6 @@ def _record(ctx: JobContext, backend: PrefilterBackend, verdicts: dict[int, Verd
                                   raw_answer=v.raw if not v.error else f"{v.raw}\n[error] {v.error}".strip(),
                                   answers=list(v.answers) if v.answers is not None else [],
                                   parsed=v.parsed, keep=v.keep, reason=v.reason, metrics=metrics))
-            frame.state = FrameState.rejected if v.keep is False else FrameState.prefiltered
-            frame.revision += 1
-            frame.updated_at = utcnow()
 
 
 def _load(ctx: JobContext, key: str) -> np.ndarray:

@@ -8,10 +8,10 @@ from typing import Any
 from sqlalchemy import Select, and_, func, select
 from sqlalchemy.orm import Session
 
-from dataset.models import Frame, FrameState, PrefilterResult, Review, ReviewDecision, User, utcnow
+from dataset.models import Frame, FrameState, PrefilterResult, Review, ReviewDecision, User
 from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound, ServiceError
-from dataset.services.frames import frame_json
+from dataset.services.frames import frame_json, update_frame
 
 REJECT_REASONS = ("blurry", "occluded", "no illusion", "watermark", "duplicate")
 
@@ -45,9 +45,7 @@ def review_frame(session: Session, frame_id: int, user: User | Any, decision: st
         raise Conflict(f"frame {frame_id} is {frame.state.value}; only prefiltered, approved or rejected frames "
                        "can be reviewed")
     before = frame.state
-    frame.state = _TARGET[decision]
-    frame.revision += 1
-    frame.updated_at = utcnow()
+    update_frame(session, frame, state=_TARGET[decision])
     if decision != "reset":
         session.add(Review(frame_id=frame.id, user_id=user.id, decision=ReviewDecision(decision), reason=reason))
     audit.record(session, user.id, f"review.{decision}", "frame", frame.id, reason=reason,
@@ -64,8 +62,11 @@ def review_many(session: Session, items: Sequence[dict[str, Any]], user: User | 
     results = []
     for item in items:
         try:
-            with session.begin_nested():
-                frame = review_frame(session, int(item["id"]), user, decision, reason, item.get("revision"))
+            # review_frame checks everything before its one conditional write, so a refused item
+            # leaves nothing behind and the others go on.
+            revision = item.get("revision")
+            frame = review_frame(session, int(item["id"]), user, decision, reason,
+                                 int(revision) if revision is not None else None)
             results.append({"id": frame.id, "status": 200, "frame": current_item(session, frame.id)})
         except ServiceError as exc:
             result = {"id": item.get("id"), "status": exc.status, "error": str(exc)}

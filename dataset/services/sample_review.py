@@ -10,6 +10,7 @@ from sqlalchemy.orm import Session
 from dataset.models import Annotation, Frame, FrameState, Sample, SampleState, User, Video, utcnow
 from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
+from dataset.services.frames import update_frame
 
 # What curators most often find wrong with a generated sample (the reject reason picker).
 REJECT_REASONS = ("surface not flat", "mask misses the illusion", "wrong support region", "bad right view",
@@ -74,14 +75,10 @@ def review_sample(session: Session, sample_id: int, user: User | Any, decision: 
     if frame.state not in (FrameState.generated, FrameState.accepted):
         raise Conflict(f"frame {frame.id} is {frame.state.value}; its sample can no longer be reviewed")
     sample.state = SampleState.accepted if decision == "accept" else SampleState.rejected
-    if decision == "accept":
-        frame.state = FrameState.accepted
-    else:
+    update_frame(session, frame, state=FrameState.accepted if decision == "accept" else FrameState.approved)
+    if decision == "reject" and ann is not None:
         # The regions stay as a draft, so the annotator fixes rather than redoes them.
-        frame.state = FrameState.approved
-        if ann is not None:
-            ann.submitted, ann.updated_at = False, utcnow()
-    frame.revision += 1
+        ann.submitted, ann.updated_at = False, utcnow()
     audit.record(session, user.id, f"sample.{decision}", "sample", sample.id, reason=reason.strip(), frame_id=frame.id)
     session.flush()
     return sample

@@ -5,6 +5,8 @@ from __future__ import annotations
 import hashlib
 import re
 import secrets
+from datetime import timedelta
+from functools import cache
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session
@@ -49,9 +51,14 @@ def get_user(session: Session, name: str) -> User:
 def authenticate(session: Session, name: str, password: str) -> User | None:
     """The active user with this name and password, else None (no hint which part was wrong)."""
     user = session.scalar(select(User).where(User.name == name))
-    if user is None or not user.active or not check_password_hash(user.password_hash, password):
-        return None
-    return user
+    # Hash even for unknown names, so the answer's timing does not tell which names exist.
+    ok = check_password_hash(user.password_hash if user else _dummy_hash(), password)
+    return user if user is not None and user.active and ok else None
+
+
+@cache
+def _dummy_hash() -> str:
+    return generate_password_hash("not anyone's password")
 
 
 def _token_digest(token: str) -> str:
@@ -70,7 +77,10 @@ def user_for_token(session: Session, token: str) -> User | None:
     row = session.scalar(select(ApiToken).where(ApiToken.token_sha256 == _token_digest(token)))
     if row is None or not row.user.active:
         return None
-    row.last_used_at = utcnow()
+    now = utcnow()
+    # At most one write a minute per token: every API call (every click) would otherwise write.
+    if row.last_used_at is None or now - row.last_used_at > timedelta(minutes=1):
+        row.last_used_at = now
     return row.user
 
 

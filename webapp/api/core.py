@@ -9,10 +9,10 @@ from flask.typing import ResponseReturnValue
 from flask_login import current_user
 from sqlalchemy import select
 
-from dataset.models import Job, Role, User
+from dataset.models import Job, JobState, Role, User
 from dataset.services import jobs as job_service
 from dataset.services import users as user_service
-from dataset.services.errors import NotFound
+from dataset.services.errors import InvalidInput, NotFound
 from dataset.services.frames import funnel_counts, list_frames, parse_state
 from webapp.api.blueprint import api, int_arg, json_body
 from webapp.api.openapi import openapi_document
@@ -78,7 +78,9 @@ def _visible_jobs() -> Any:
 def list_jobs() -> ResponseReturnValue:
     query = _visible_jobs()
     if state := request.args.get("state"):
-        query = query.where(Job.state == state)
+        if state not in JobState.__members__:
+            raise InvalidInput(f"state must be one of {', '.join(JobState)}")
+        query = query.where(Job.state == JobState(state))
     limit = min(max(int_arg("limit", 50) or 50, 1), 500)
     return {"items": [job_service.job_json(j) for j in g.db.scalars(query.limit(limit))]}
 

@@ -9,7 +9,7 @@ from flask_login import current_user
 from annotation.vlm import QUESTION_LABELS
 from dataset.models import Role
 from dataset.services import review as review_service
-from dataset.services.errors import Conflict
+from dataset.services.errors import Conflict, InvalidInput
 from webapp.api.blueprint import api, int_arg, json_body
 from webapp.auth import requires
 
@@ -30,9 +30,11 @@ def review_frames() -> ResponseReturnValue:
 def review_frame(frame_id: int) -> ResponseReturnValue:
     body = json_body()
     revision = body.get("revision")
+    if revision is not None and not isinstance(revision, int):
+        raise InvalidInput("revision must be an integer (the frame's revision you loaded)")
     try:
         frame = review_service.review_frame(g.db, frame_id, current_user, str(body.get("decision", "")),
-                                            str(body.get("reason", "")), int(revision) if revision is not None else None)
+                                            str(body.get("reason", "")), revision)
     except Conflict as exc:
         g.db.rollback()
         current = review_service.current_item(g.db, frame_id)

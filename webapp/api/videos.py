@@ -9,6 +9,7 @@ from flask.typing import ResponseReturnValue
 from flask_login import current_user
 from sqlalchemy import func, select
 
+from annotation.vlm import BACKEND_NAMES
 from dataset.ingest.sources import VIDEO_EXTENSIONS
 from dataset.models import Frame, Role, User, Video
 from dataset.services import jobs as job_service
@@ -65,8 +66,12 @@ def start_prefilter() -> ResponseReturnValue:
     """Queue prefilter jobs: body ``{"video_id"?, "backend"?, "sparse"?}``."""
     body = json_body()
     video_id = body.get("video_id")
-    jobs = launch_prefilter(g.db, runtime().submit, g.db.get(User, current_user.id),
-                            video_id=int(video_id) if video_id is not None else None,
-                            backend=body.get("backend") or None, sparse=bool(body.get("sparse")))
+    if video_id is not None and not isinstance(video_id, int):
+        raise InvalidInput("video_id must be an integer")
+    backend = body.get("backend") or None
+    if backend is not None and backend not in BACKEND_NAMES:
+        raise InvalidInput(f"backend must be one of {', '.join(BACKEND_NAMES)}")
+    jobs = launch_prefilter(g.db, runtime().submit, g.db.get(User, current_user.id), video_id=video_id,
+                            backend=backend, sparse=bool(body.get("sparse")))
     g.db.commit()
     return {"jobs": [job_service.job_json(j) for j in jobs]}, 202

@@ -47,9 +47,11 @@ def login() -> ResponseReturnValue:
 
 def _safe_next(target: str | None) -> str:
     """Only same-site paths, so the login page cannot be used to redirect elsewhere."""
-    if target:
+    # Browsers read "\" as "/", so "/\\evil.example" would leave the site too.
+    if target and target.startswith("/") and target[1:2] not in ("/", "\\") and target.isprintable() \
+            and "\\" not in target:
         parts = urlsplit(target)
-        if not parts.scheme and not parts.netloc and target.startswith("/") and not target.startswith("//"):
+        if not parts.scheme and not parts.netloc:
             return target
     return url_for("pages.dashboard")
 
