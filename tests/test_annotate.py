@@ -186,3 +186,16 @@ def test_propagation_writes_drafts_to_the_next_frames(client, tokens, scene, run
     bad = client.post(f"/api/v1/frames/{frame_id}/propagate", headers=auth(tokens),
                       json={"pair": 0, "kind": "illusion", "mask": mask_to_rle(np.ones((4, 4), bool)), "count": 2})
     assert bad.status_code == 400
+
+
+def test_a_box_bounds_the_mask(client, tokens, scene) -> None:  # type: ignore[no-untyped-def]
+    frame_id = client.post("/api/v1/queue/annotate/next", headers=auth(tokens)).json["frame_id"]
+    box = [20.0, 20.0, 120.0, 90.0]  # a featureless stretch of wall and ceiling
+    response = client.post(f"/api/v1/frames/{frame_id}/segment", headers=auth(tokens),
+                           json={"points": [], "labels": [], "box": box})
+    assert response.status_code == 200, response.json
+    rle = response.json["mask"]
+    mask = coco_mask.decode({"size": rle["size"], "counts": rle["counts"].encode()}).astype(bool)
+    outside = mask.copy()
+    outside[20:91, 20:121] = False
+    assert not outside.any() and response.json["area"] == int(mask.sum())

@@ -310,8 +310,15 @@ def segment(settings: Any, media: MediaStore, frame: Frame, body: dict[str, Any]
     except SegmentError as exc:
         raise InvalidInput(str(exc)) from None
     best = candidates[0]
-    return {"mask": mask_to_rle(best.mask), "score": float(best.score), "embedding_cached": cached,
-            "model_id": segmenter.model_id, "area": int(best.mask.sum())}
+    mask = best.mask
+    if box is not None:
+        # A box means "it is in here": nothing outside it belongs to the region, whatever the model says.
+        x0, y0, x1, y1 = (int(round(v)) for v in box)
+        inside = np.zeros_like(mask)
+        inside[max(0, min(y0, y1)):max(y0, y1) + 1, max(0, min(x0, x1)):max(x0, x1) + 1] = True
+        mask = mask & inside
+    return {"mask": mask_to_rle(mask), "score": float(best.score), "embedding_cached": cached,
+            "model_id": segmenter.model_id, "area": int(mask.sum())}
 
 
 _HOT: OrderedDict[tuple[str, str], Embedding] = OrderedDict()

@@ -54,6 +54,7 @@ def frame_detail(frame_id: int) -> ResponseReturnValue:
 @requires(Role.annotator)
 def renew_lease(frame_id: int) -> ResponseReturnValue:
     expires = annotate.renew_lease(g.db, frame_id, current_user, runtime().settings.annotation_lease_s)
+    _prefetch(g.db.get(Frame, frame_id))  # a frame opened directly (or by ←/→) gets prepared too
     g.db.commit()
     return {"frame_id": frame_id, "lease_expires": _iso(expires)}
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -151,6 +152,8 @@ def demo(state: CliState, no_serve: bool, videos: int, host: str | None, port: i
     env = {**os.environ, HOME_ENV: str(settings.home)}
     worker = subprocess.Popen([sys.executable, "-m", "webapp.cli", "worker"], env=env)
     click.echo(f"worker started (pid {worker.pid})", err=True)
+    # Python skips `finally` on SIGTERM; turn it into an exit so the worker is stopped with us.
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
     try:
         _serve(state, host, port, threads=8)
     finally:
