@@ -76,3 +76,12 @@ def running_demo(home: Path, videos: int = 1) -> Iterator[str]:
             proc.wait(timeout=30)
         except subprocess.TimeoutExpired:
             proc.kill()
+
+
+def login(page, url: str, name: str, password: str) -> None:  # type: ignore[no-untyped-def]
+    """Log in through the login form, as a person does, and land on the dashboard."""
+    page.goto(url + "/login")
+    page.fill("input[name=name]", name)
+    page.fill("input[name=password]", password)
+    page.click("button[type=submit]")
+    page.wait_for_url(url + "/")

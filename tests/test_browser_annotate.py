@@ -16,7 +16,7 @@ import pytest
 from pycocotools import mask as coco_mask
 from scipy import ndimage
 
-from tests.browser import ROOT, running_demo
+from tests.browser import ROOT, login, running_demo
 
 pytestmark = pytest.mark.browser
 
@@ -44,13 +44,9 @@ def iou(a: np.ndarray, b: np.ndarray) -> float:
     return float((a & b).sum() / (a | b).sum())
 
 
-def login(context, url: str, name: str, password: str):  # type: ignore[no-untyped-def]
+def logged_in_page(context, url: str, name: str, password: str):  # type: ignore[no-untyped-def]
     page = context.new_page()
-    page.goto(url + "/login")
-    page.fill("input[name=name]", name)
-    page.fill("input[name=password]", password)
-    page.click("button[type=submit]")
-    page.wait_for_url(url + "/")
+    login(page, url, name, password)
     return page
 
 
@@ -96,11 +92,11 @@ def test_annotator_clicks_pairs_submits_and_a_second_annotator_works_alongside(b
                        cwd=ROOT, capture_output=True)
         errors: list[str] = []
         curators = browser.new_context()
-        approve_all(login(curators, url, "curator", "curator-demo"), url)
+        approve_all(logged_in_page(curators, url, "curator", "curator-demo"), url)
         curators.close()
 
         one = browser.new_context(viewport={"width": 1400, "height": 860})
-        page = login(one, url, "annotator", "annotator-demo")
+        page = logged_in_page(one, url, "annotator", "annotator-demo")
         page.on("pageerror", lambda e: errors.append(str(e)))
         page.click("[data-nav=annotate]")
         frame = shown_frame(page)
@@ -172,7 +168,7 @@ def test_annotator_clicks_pairs_submits_and_a_second_annotator_works_alongside(b
         assert following["regions"][0]["clicks"] == [{"propagated_from": mine}] and not following["submitted"]
 
         two = browser.new_context(viewport={"width": 1400, "height": 860})
-        other = login(two, url, "ann2", "ann2-secret")
+        other = logged_in_page(two, url, "ann2", "ann2-secret")
         other.on("pageerror", lambda e: errors.append(str(e)))
         other.goto(url + "/annotate")
         theirs = shown_frame(other)["id"]

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.browser import running_demo
+from tests.browser import login, running_demo
 
 pytestmark = pytest.mark.browser
 
@@ -19,11 +19,7 @@ def test_curator_reviews_frames_with_the_keyboard_and_the_funnel_follows(browser
         page = browser.new_page(viewport={"width": 1400, "height": 900})
         errors: list[str] = []
         page.on("pageerror", lambda error: errors.append(str(error)))
-        page.goto(url + "/login")
-        page.fill("input[name=name]", "curator")
-        page.fill("input[name=password]", "curator-demo")
-        page.click("button[type=submit]")
-        page.wait_for_url(url + "/")
+        login(page, url, "curator", "curator-demo")
         approved_before = int(page.locator("[data-stage=approved] .count").inner_text())
 
         page.click("[data-nav=review]")

@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
-from tests.browser import running_demo
+from tests.browser import login, running_demo
 
 pytestmark = pytest.mark.browser
 
@@ -47,11 +47,7 @@ def test_curator_reviews_samples_and_sees_them_in_2d_and_3d(browser, tmp_path: P
         page = browser.new_page(viewport={"width": 1400, "height": 900})
         errors: list[str] = []
         page.on("pageerror", lambda error: errors.append(str(error)))
-        page.goto(url + "/login")
-        page.fill("input[name=name]", "curator")
-        page.fill("input[name=password]", "curator-demo")
-        page.click("button[type=submit]")
-        page.wait_for_url(url + "/")
+        login(page, url, "curator", "curator-demo")
 
         # ---- the grid: the demo generated samples for 3 frames before the server started
         page.goto(url + "/samples")
