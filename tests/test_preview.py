@@ -269,3 +269,18 @@ def test_frame_preview_redirects_to_the_newest_sample_or_explains(client, tokens
     missing = client.get(f"/frames/{bare_frame_id}/preview", headers=headers)
     assert missing.status_code == 404 and "no generated sample yet" in missing.get_data(as_text=True)
     assert client.get("/frames/999/preview", headers=headers).status_code == 404
+
+
+def test_the_render_cache_keeps_within_its_budget(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    import os
+
+    from webapp.preview.cache import RenderCache
+
+    cache = RenderCache(tmp_path / "preview", budget_bytes=2500)
+    first = cache.get_or_make({"sample": 1}, "png", lambda: b"a" * 1000)
+    os.utime(first, (1, 1))  # long unused
+    second = cache.get_or_make({"sample": 2}, "png", lambda: b"b" * 1000)
+    third = cache.get_or_make({"sample": 3}, "png", lambda: b"c" * 1000)
+    assert not first.exists() and second.exists() and third.exists() and cache.usage() == 2000
+    assert cache.get_or_make({"sample": 2}, "png", lambda: b"never made") == second
+    assert second.read_bytes() == b"b" * 1000

@@ -41,6 +41,7 @@ class Settings(BaseSettings):
     # Model backends: each has a weight-free default; the others load from a local directory.
     annotation_lease_s: int = Field(600, ge=30, description="How long a frame stays with an annotator without a renewal.")
     embedding_cache_mb: int = Field(2048, gt=0, description="Disk budget of the segmenter's embedding cache.")
+    preview_cache_mb: int = Field(1024, gt=0, description="Disk budget of rendered previews (2D views, 3D scenes).")
     segmenter: Literal["classical", "sam2"] = "classical"
     sam2_model_path: Path | None = None
     depth_backend: Literal["precomputed", "depth-anything-v2"] = "precomputed"

@@ -12,14 +12,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from dataset.atomic import atomic_write_bytes
+from dataset.filecache import BoundedFileCache
 
 
-class RenderCache:
-    """Files under ``root``, one per key; concurrent makers of one key both write the same bytes."""
-
-    def __init__(self, root: Path) -> None:
-        self.root = Path(root)
+class RenderCache(BoundedFileCache):
+    """Files under ``root``, one per key, within a byte budget; concurrent makers of one key both
+    write the same bytes."""
 
     def path(self, key: Any, ext: str) -> Path:
         """Where the file for ``key`` (any JSON-able value) lives, whether or not it exists yet."""
@@ -29,6 +27,6 @@ class RenderCache:
     def get_or_make(self, key: Any, ext: str, make: Callable[[], bytes]) -> Path:
         """The cached file for ``key``, made by ``make()`` on a miss."""
         path = self.path(key, ext)
-        if not path.is_file():
-            atomic_write_bytes(path, make())
+        if not self.touch(path):
+            self.write(path, make())
         return path

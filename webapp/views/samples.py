@@ -27,7 +27,8 @@ samples = Blueprint("samples", __name__)
 
 def _preview() -> SamplePreview:
     rt = runtime()
-    return SamplePreview(rt.media, RenderCache(rt.settings.cache_dir / "preview"))
+    budget = rt.settings.preview_cache_mb * 1024 * 1024
+    return SamplePreview(rt.media, RenderCache(rt.settings.cache_dir / "preview", budget))
 
 
 @cache
