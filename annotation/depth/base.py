@@ -11,6 +11,8 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from annotation.images import rgb_image
+
 
 class DepthError(ValueError):
     """A depth request that cannot be served: a bad image, or a backend without a model."""
@@ -31,8 +33,4 @@ class DepthBackend(Protocol):
 
 def check_image(image: np.ndarray) -> np.ndarray:
     """``image`` as a C-contiguous RGB uint8 (H, W, 3) array; DepthError otherwise."""
-    if not (isinstance(image, np.ndarray) and image.dtype == np.uint8 and image.ndim == 3
-            and image.shape[2] == 3 and min(image.shape[:2]) > 0):
-        raise DepthError(f"expected an RGB uint8 HxWx3 image, got "
-                         f"{getattr(image, 'dtype', type(image).__name__)} {getattr(image, 'shape', '')}")
-    return np.ascontiguousarray(image)
+    return rgb_image(image, DepthError)

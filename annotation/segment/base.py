@@ -14,6 +14,8 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from annotation.images import rgb_image
+
 Box = tuple[float, float, float, float]  # (x0, y0, x1, y1), full-resolution pixels
 Progress = Callable[[float], None]  # called with the fraction done, 0..1
 
@@ -108,11 +110,7 @@ class Prompt:
 
 def check_image(image: np.ndarray) -> np.ndarray:
     """``image`` as a C-contiguous RGB uint8 (H, W, 3) array; SegmentError otherwise."""
-    if not (isinstance(image, np.ndarray) and image.dtype == np.uint8 and image.ndim == 3
-            and image.shape[2] == 3 and min(image.shape[:2]) > 0):
-        raise SegmentError(f"expected an RGB uint8 HxWx3 image, got "
-                           f"{getattr(image, 'dtype', type(image))} {getattr(image, 'shape', '')}")
-    return np.ascontiguousarray(image)
+    return rgb_image(image, SegmentError)
 
 
 def check_mask(mask: np.ndarray, height: int, width: int, what: str = "mask") -> np.ndarray:
