@@ -2,6 +2,7 @@
 // an undo stack and a large view. Decisions run one after another, in the order the keys were
 // pressed, so each sends the revision the previous one returned and undo undoes what it says.
 import { api, el, poll } from "./api.js";
+import { focusTile as focusGridTile, pageOffset, serial, stepOf } from "./grid.js";
 
 const $ = (id) => document.getElementById(id);
 const root = $("review");
@@ -23,15 +24,11 @@ const view = { items: [], total: 0, offset: 0, focus: 0, anchor: null, selected:
 const latest = new Map();  // frame id → newest known item, also for frames on other pages (undo needs them)
 const mine = new Map();    // frame id → the state this session's decisions left it in, for the counters
 const undoStack = [];      // [{decision, frames: [{before, after, mineBefore}]}]
-let queue = Promise.resolve();
 let recheck;
 
 // ---- data -------------------------------------------------------------------------------------
 
-function enqueue(task) {
-  queue = queue.then(task).catch((err) => say(err.message, "error"));
-  return queue;
-}
+const enqueue = serial((err) => say(err.message, "error"));
 
 function query() {
   const f = filters.elements;
@@ -219,9 +216,7 @@ function moveTo(index, extend = false) {
 }
 
 function step(direction, extend) {
-  const columns = viewer.open ? 1 : getComputedStyle(grid).gridTemplateColumns.split(" ").length;
-  const delta = { left: -1, right: 1, up: -columns, down: columns }[direction];
-  moveTo(view.focus + delta, extend);
+  moveTo(view.focus + stepOf(direction, grid, viewer.open), extend);
 }
 
 function toggle(index) {
@@ -239,23 +234,15 @@ function selectPage() {
 
 function page(direction) {
   enqueue(async () => {
-    if (direction > 0) {
-      if (view.offset + view.items.length >= view.total) return say("This is the last page.");
-      // Reviewed frames have left the filter: start the next page after the ones that are still in it.
-      view.offset += view.items.filter(inFilter).length;
-    } else {
-      if (view.offset === 0) return say("This is the first page.");
-      view.offset = Math.max(0, view.offset - PAGE);
-    }
+    const next = pageOffset(view, direction, PAGE, inFilter);
+    if (typeof next === "string") return say(next);
+    view.offset = next;
     await load();
   });
 }
 
 function focusTile() {
-  const node = grid.children[view.focus];
-  if (!node?.classList.contains("tile") || viewer.open) return;
-  node.focus({ preventScroll: true });
-  node.scrollIntoView({ block: "nearest" });
+  if (!viewer.open) focusGridTile(grid, view.focus);
 }
 
 // ---- rendering --------------------------------------------------------------------------------

@@ -1,6 +1,7 @@
 // The samples grid: keyboard-first accept/reject of generated samples, filters, paging, and a way
 // into each sample's page and 3D preview. Decisions run one after another, in key order.
 import { api, el } from "./api.js";
+import { focusTile as focusGridTile, pageOffset, serial, stepOf } from "./grid.js";
 import { keyFigures, reasonPicker, review } from "./sample_review.js";
 
 const $ = (id) => document.getElementById(id);
@@ -20,12 +21,8 @@ const STEPS = { ArrowLeft: "left", h: "left", ArrowRight: "right", l: "right", A
 
 const view = { items: [], total: 0, offset: 0, focus: 0 };
 const mine = new Map();  // sample id → the state this session's decisions left it in
-let queue = Promise.resolve();
 
-function enqueue(task) {
-  queue = queue.then(task).catch((err) => say(err.message, "error"));
-  return queue;
-}
+const enqueue = serial((err) => say(err.message, "error"));
 
 // ---- data -------------------------------------------------------------------------------------
 
@@ -120,20 +117,14 @@ function moveTo(index) {
 }
 
 function step(direction) {
-  const columns = getComputedStyle(grid).gridTemplateColumns.split(" ").length;
-  moveTo(view.focus + { left: -1, right: 1, up: -columns, down: columns }[direction]);
+  moveTo(view.focus + stepOf(direction, grid));
 }
 
 function page(direction) {
   enqueue(async () => {
-    if (direction > 0) {
-      if (view.offset + view.items.length >= view.total) return say("This is the last page.");
-      // Decided samples have left the filter: the next page starts after the ones still in it.
-      view.offset += view.items.filter(inFilter).length;
-    } else {
-      if (view.offset === 0) return say("This is the first page.");
-      view.offset = Math.max(0, view.offset - PAGE);
-    }
+    const next = pageOffset(view, direction, PAGE, inFilter);
+    if (typeof next === "string") return say(next);
+    view.offset = next;
     await load();
   });
 }
@@ -156,10 +147,7 @@ function showThumbs() {
 }
 
 function focusTile() {
-  const node = grid.children[view.focus];
-  if (!node?.classList.contains("tile")) return;
-  node.focus({ preventScroll: true });
-  node.scrollIntoView({ block: "nearest" });
+  focusGridTile(grid, view.focus);
 }
 
 // ---- rendering --------------------------------------------------------------------------------

@@ -1,0 +1,31 @@
+// What the keyboard-first grids (review, samples) share: one task at a time, in the order the keys
+// were pressed, and paging that keeps the curator's place while decided items leave the filter.
+
+export function serial(onError) {
+  let queue = Promise.resolve();
+  return (task) => (queue = queue.then(task).catch(onError));
+}
+
+// Arrow-key moves in a CSS grid: ±1 sideways, ±(tiles per row) up and down.
+export function stepOf(direction, grid, oneColumn = false) {
+  const columns = oneColumn ? 1 : getComputedStyle(grid).gridTemplateColumns.split(" ").length;
+  return { left: -1, right: 1, up: -columns, down: columns }[direction];
+}
+
+// The offset of the next or previous page, or a message when there is none.
+export function pageOffset(view, direction, pageSize, inFilter) {
+  if (direction > 0) {
+    if (view.offset + view.items.length >= view.total) return "This is the last page.";
+    // Decided items have left the filter: the next page starts after the ones still in it.
+    return view.offset + view.items.filter(inFilter).length;
+  }
+  if (view.offset === 0) return "This is the first page.";
+  return Math.max(0, view.offset - pageSize);
+}
+
+export function focusTile(grid, index) {
+  const node = grid.children[index];
+  if (!node?.classList.contains("tile")) return;
+  node.focus({ preventScroll: true });
+  node.scrollIntoView({ block: "nearest" });
+}
