@@ -11,7 +11,7 @@ from dataset.models import Frame, RegionKind, Role, User
 from dataset.services import annotate
 from dataset.services import jobs as job_service
 from dataset.services.errors import InvalidInput, NotFound
-from webapp.api.blueprint import api, json_body
+from webapp.api.blueprint import api, get_or_404, json_body
 from webapp.app import runtime
 from webapp.auth import requires
 
@@ -70,9 +70,7 @@ def release_lease(frame_id: int) -> ResponseReturnValue:
 @api.post("/frames/<int:frame_id>/segment")
 @requires(Role.annotator)
 def segment(frame_id: int) -> ResponseReturnValue:
-    frame = g.db.get(Frame, frame_id)
-    if frame is None:
-        raise NotFound(f"no frame {frame_id}")
+    frame = get_or_404(Frame, frame_id, "frame")
     rt = runtime()
     return annotate.segment(rt.settings, rt.media, frame, json_body())
 
@@ -114,9 +112,7 @@ def propagate(frame_id: int) -> ResponseReturnValue:
         raise InvalidInput("send pair, kind (illusion|support), mask (COCO RLE) and count") from None
     if not 1 <= count <= 100:
         raise InvalidInput("count must be 1..100 frames")
-    frame = g.db.get(Frame, frame_id)
-    if frame is None:
-        raise NotFound(f"no frame {frame_id}")
+    frame = get_or_404(Frame, frame_id, "frame")
     try:
         shape = rle_to_mask(body.get("mask")).shape
     except SegmentError as exc:

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, TypeVar
 
-from flask import Blueprint, request
+from flask import Blueprint, g, request
 
-from dataset.services.errors import InvalidInput
+from dataset.services.errors import InvalidInput, NotFound
 
 api = Blueprint("api", __name__)
+T = TypeVar("T")
 
 
 def json_body() -> dict[str, Any]:
@@ -26,3 +27,11 @@ def int_arg(name: str, default: int | None = None) -> int | None:
         return int(raw)
     except ValueError:
         raise InvalidInput(f"query parameter {name!r} must be an integer") from None
+
+
+def get_or_404(model: type[T], ident: int, what: str) -> T:
+    """The row ``ident`` of ``model``, or a 404 naming the ``what``."""
+    row = g.db.get(model, ident)
+    if row is None:
+        raise NotFound(f"no {what} {ident}")
+    return row

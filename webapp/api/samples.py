@@ -9,8 +9,7 @@ from flask_login import current_user
 from dataset.models import Role, Sample, User
 from dataset.services import jobs as job_service
 from dataset.services import sample_review
-from dataset.services.errors import NotFound
-from webapp.api.blueprint import api, int_arg, json_body
+from webapp.api.blueprint import api, get_or_404, int_arg, json_body
 from webapp.app import runtime
 from webapp.auth import requires
 
@@ -44,9 +43,7 @@ def review_sample(sample_id: int) -> ResponseReturnValue:
 @api.post("/samples/<int:sample_id>/regenerate")
 @requires(Role.curator)
 def regenerate_sample(sample_id: int) -> ResponseReturnValue:
-    sample = g.db.get(Sample, sample_id)
-    if sample is None:
-        raise NotFound(f"no sample {sample_id}")
+    sample = get_or_404(Sample, sample_id, "sample")
     job = runtime().submit(g.db, "generate", {"frame_id": sample.frame_id, "annotation_version": sample.annotation_version},
                            g.db.get(User, current_user.id))
     g.db.commit()
