@@ -13,16 +13,16 @@ from tests.conftest import login
 
 PUBLIC = None
 EXPECTED: dict[str, Role | None] = {
-    "pages.healthz": PUBLIC,
-    "pages.login": PUBLIC,
-    "pages.logout": Role.annotator,
-    "pages.dashboard": Role.annotator,
-    "pages.frames": Role.annotator,
-    "pages.jobs": Role.annotator,
-    "pages.annotate": Role.annotator,
-    "pages.review": Role.curator,
-    "pages.ingest": Role.curator,
-    "pages.users": Role.admin,
+    "auth.healthz": PUBLIC,
+    "auth.login": PUBLIC,
+    "auth.logout": Role.annotator,
+    "dashboard.dashboard": Role.annotator,
+    "dashboard.frames": Role.annotator,
+    "jobs.jobs": Role.annotator,
+    "annotate.annotate": Role.annotator,
+    "review.review": Role.curator,
+    "ingest.ingest": Role.curator,
+    "admin.users": Role.admin,
     "samples.index": Role.annotator,
     "samples.detail": Role.annotator,
     "samples.preview": Role.annotator,
@@ -30,7 +30,7 @@ EXPECTED: dict[str, Role | None] = {
     "samples.scene": Role.annotator,
     "samples.viser_client": Role.annotator,
     "samples.frame_preview": Role.annotator,
-    "pages.create_user": Role.admin,
+    "admin.create_user": Role.admin,
     "media.serve": Role.annotator,
     "api.openapi": Role.annotator,
     "api.me": Role.annotator,
@@ -105,7 +105,7 @@ def test_session_login_sees_the_same_matrix_for_pages(app, caller: str) -> None:
     client = app.test_client()
     assert login(client, caller).status_code == 302
     for endpoint, method, path in _routes(app):
-        if method != "GET" or endpoint in ("pages.login", "pages.healthz"):
+        if method != "GET" or endpoint in ("auth.login", "auth.healthz"):
             continue
         status = client.get(path).status_code
         if Role(caller).allows(EXPECTED[endpoint]):

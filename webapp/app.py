@@ -45,22 +45,13 @@ def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
     init_auth(app)
 
     from webapp.api import api
-    from webapp.views.media import media
-    from webapp.views.pages import pages
-    from webapp.views.samples import samples
+    from webapp.views import BLUEPRINTS
 
-    app.register_blueprint(pages)
-    app.register_blueprint(media)
-    app.register_blueprint(samples)
+    for blueprint in BLUEPRINTS:
+        app.register_blueprint(blueprint)
     app.register_blueprint(api, url_prefix="/api/v1")
     _register_errors(app)
     return app
-
-
-def runtime() -> Runtime:
-    from flask import current_app
-
-    return current_app.extensions["runtime"]
 
 
 def _stored_secret(home: Path) -> str:

@@ -109,7 +109,7 @@ def init_auth(app: Flask) -> None:
             if not current_user.is_authenticated:
                 if is_api_request():
                     return json_error(401, "authentication required: log in or send 'Authorization: Bearer <token>'")
-                return redirect(url_for("pages.login", next=request.full_path.rstrip("?")))
+                return redirect(url_for("auth.login", next=request.full_path.rstrip("?")))
             if not current_user.allows(required):
                 abort(403, f"needs the {required.value} role")
         if request.method not in ("GET", "HEAD", "OPTIONS") and not getattr(current_user, "via_token", False):

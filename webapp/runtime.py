@@ -39,3 +39,10 @@ class Runtime:
 
     def close(self) -> None:
         self.engine.dispose()
+
+
+def runtime() -> Runtime:
+    """The runtime of the app serving the current request."""
+    from flask import current_app
+
+    return current_app.extensions["runtime"]

@@ -12,8 +12,8 @@ from dataset.services import annotate
 from dataset.services import jobs as job_service
 from dataset.services.errors import InvalidInput, NotFound
 from webapp.api.blueprint import api, get_or_404, json_body
-from webapp.app import runtime
 from webapp.auth import requires
+from webapp.runtime import runtime
 
 
 def _iso(value) -> str:  # type: ignore[no-untyped-def]

@@ -16,8 +16,8 @@ from dataset.services.errors import InvalidInput, NotFound
 from dataset.services.frames import funnel_counts, list_frames, parse_state
 from webapp.api.blueprint import api, int_arg, json_body
 from webapp.api.openapi import openapi_document
-from webapp.app import runtime
 from webapp.auth import requires
+from webapp.runtime import runtime
 
 
 @api.get("/openapi.json")

@@ -10,8 +10,8 @@ from dataset.models import Role, Sample, User
 from dataset.services import jobs as job_service
 from dataset.services import sample_review
 from webapp.api.blueprint import api, get_or_404, int_arg, json_body
-from webapp.app import runtime
 from webapp.auth import requires
+from webapp.runtime import runtime
 
 
 @api.get("/samples")

@@ -17,8 +17,8 @@ from dataset.services.errors import InvalidInput
 from dataset.services.ingest import DEFAULT_DEDUP_HAMMING, ingest_params
 from dataset.services.prefilter import launch_prefilter
 from webapp.api.blueprint import api, json_body
-from webapp.app import runtime
 from webapp.auth import requires
+from webapp.runtime import runtime
 
 
 @api.get("/videos")

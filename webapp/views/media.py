@@ -7,8 +7,8 @@ from flask.typing import ResponseReturnValue
 
 from dataset.media import MediaKeyError
 from dataset.models import Role
-from webapp.app import runtime
 from webapp.auth import requires
+from webapp.runtime import runtime
 
 media = Blueprint("media", __name__)
 

@@ -17,11 +17,11 @@ from flask_login import current_user
 
 from dataset.models import Frame, Role, SampleState
 from dataset.services import sample_review
-from webapp.app import runtime
 from webapp.auth import requires
 from webapp.preview import images, qa
 from webapp.preview.cache import RenderCache
 from webapp.preview.sample_preview import STAGES, SamplePreview
+from webapp.runtime import runtime
 
 samples = Blueprint("samples", __name__)
 

@@ -1,0 +1,22 @@
+"""The curators' review grid."""
+
+from __future__ import annotations
+
+from flask import Blueprint, g, render_template, request
+from flask.typing import ResponseReturnValue
+
+from annotation.vlm import QUESTION_LABELS
+from dataset.models import Role, Video
+from dataset.services.review import REJECT_REASONS
+from webapp.auth import requires
+
+bp = Blueprint("review", __name__)
+
+
+@bp.get("/review")
+@requires(Role.curator)
+def review() -> ResponseReturnValue:
+    """The curators' review grid (per video with ?video_id=N)."""
+    video_id = request.args.get("video_id", type=int)
+    video = g.db.get(Video, video_id) if video_id else None
+    return render_template("review.html", video=video, reasons=REJECT_REASONS, questions=QUESTION_LABELS)
