@@ -2,11 +2,17 @@
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
-# The CPU build of torch (the default one on PyPI is a multi-GB CUDA build). Override for a GPU box.
-TORCH_SPEC ?= torch==2.13.0
+# Every install takes its versions from constraints.txt, the set the suite last passed with
+# (`make lock` refreshes it). torch is pinned by version only, so either build of that version
+# satisfies it: PIP_ARGS can point pip at PyTorch's CPU or CUDA wheel index (README).
+CONSTRAINTS := constraints.txt
+PIP_ARGS ?=
+PIP = $(BIN)/pip install --quiet --disable-pip-version-check -c $(CONSTRAINTS) $(PIP_ARGS)
 PYTEST_ARGS ?=
+# torch moves only when this is changed on purpose (`make lock TORCH=torch==2.14.1`).
+TORCH ?= torch==$(shell sed -n 's/^torch==//p' $(CONSTRAINTS))
 
-.PHONY: demo test lint venv venv-test bench clean
+.PHONY: demo test lint venv venv-test bench lock clean
 
 demo: $(VENV)/.installed
 	$(BIN)/illusion-studio demo
@@ -31,14 +37,27 @@ venv-test: $(VENV)/.installed-test
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 
-$(VENV)/.installed: pyproject.toml | $(BIN)/python
-	$(BIN)/pip install --quiet --disable-pip-version-check -e .
+# The demo trains and serves a model, so it needs the model extra (torch) too.
+$(VENV)/.installed: pyproject.toml $(CONSTRAINTS) | $(BIN)/python
+	$(PIP) -e '.[models]'
 	touch $@
 
-$(VENV)/.installed-test: pyproject.toml | $(BIN)/python
-	$(BIN)/pip install --quiet --disable-pip-version-check "$(TORCH_SPEC)"
-	$(BIN)/pip install --quiet --disable-pip-version-check -e '.[test,models]'
+$(VENV)/.installed-test: pyproject.toml $(CONSTRAINTS) | $(BIN)/python
+	$(PIP) -e '.[test,models]'
 	touch $@ $(VENV)/.installed
+
+# Refresh the pinned set: resolve pyproject's ranges afresh in a scratch venv, run the whole
+# suite on what was resolved, and only then write constraints.txt (commit it with the change).
+lock:
+	rm -rf .venv-lock
+	$(PYTHON) -m venv .venv-lock
+	.venv-lock/bin/pip install --quiet --disable-pip-version-check $(PIP_ARGS) "$(TORCH)"
+	.venv-lock/bin/pip install --quiet --disable-pip-version-check $(PIP_ARGS) -e '.[test,models]'
+	.venv-lock/bin/python -m pytest -q $(PYTEST_ARGS)
+	{ echo "# The dependency set the whole suite passed with; every install uses it (pip -c). Refresh: make lock"; \
+	  .venv-lock/bin/pip freeze --exclude-editable | sed -E 's/^(torch==[^+]*)\+.*/\1/'; } > $(CONSTRAINTS).new
+	mv $(CONSTRAINTS).new $(CONSTRAINTS)
+	rm -rf .venv-lock
 
 clean:
 	rm -rf $(VENV) var .pytest_cache .hypothesis
