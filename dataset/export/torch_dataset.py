@@ -22,8 +22,8 @@ class IllusionStereoDataset(Dataset[Item]):
 
     - ``left``, ``right``: float32 3xHxW in [0, 1] (RGB);
     - ``disparity``: float32 1xHxW, pixels, the training target (NaN and inf → 0);
-    - ``valid``: bool 1xHxW, finite disparity ∧ the sample's valid mask (captures). Right-view
-      holes do not enter: they are in right-view pixels, and every left pixel keeps its disparity;
+    - ``valid``: bool 1xHxW, finite disparity ∧ the sample's valid mask (captures); right-view
+      holes never enter it (why: ``NATIVE_FORMAT.md``, "In PyTorch");
     - ``illusion``: bool 1xHxW, the union of the sample's illusion masks;
     - ``meta``: {"id", "video", "index", "scale"} (str, str, int, float: default collation works).
 
