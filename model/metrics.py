@@ -44,12 +44,13 @@ def d1(pred: Array, gt: Array, mask: Array) -> float:
 
 
 def depth_metrics(pred_disp: Array, gt_disp: Array, mask: Array, fx: float, baseline: float,
-                  depth_range: tuple[float, float] | None = None) -> dict[str, float]:
+                  depth_range: tuple[float, float] | None = None, *, doffs: float = 0.0) -> dict[str, float]:
     """Depth errors of a disparity prediction: ``abs_rel``, ``rmse`` (metres), ``log10`` and
     ``delta1``..``delta3`` (FRACTIONS of pixels with max(p/g, g/p) < 1.25**k).
 
-    Depth = ``fx`` (pixels) · ``baseline`` (metres) / disparity (pixels). Only mask pixels with a
-    positive ground-truth disparity count; with ``depth_range`` = (near, far) metres only those
+    Depth = ``fx`` (pixels) · ``baseline`` (metres) / (disparity + ``doffs``) (pixels; ``doffs``
+    is Middlebury's principal-point offset, 0 for rectified rigs). Only mask pixels with a
+    positive ground-truth disparity + doffs count; with ``depth_range`` = (near, far) metres only those
     whose true depth lies strictly inside it, and predicted depths are clipped into it (a
     non-positive predicted disparity counts as farthest). Without a range such a prediction has
     infinite depth, and the errors it enters are infinite. All NaN if no pixel counts.
@@ -57,6 +58,7 @@ def depth_metrics(pred_disp: Array, gt_disp: Array, mask: Array, fx: float, base
     if not (fx > 0 and baseline > 0):
         raise ValueError(f"fx and baseline must be > 0, got fx={fx}, baseline={baseline}")
     pred, gt, region = _prepared(pred_disp, gt_disp, mask)
+    pred, gt = pred + doffs, gt + doffs
     region = region & (gt > 0)
     focal_length = fx * baseline
     gt_depth = focal_length / gt[region]
