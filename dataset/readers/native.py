@@ -8,7 +8,7 @@ captures whose video records intrinsics and a baseline get a camera.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -61,7 +61,7 @@ class NativeReader(ListedReader):
         return self.root / spec["path"]
 
 
-def pair_types(illusion: Mapping[str, np.ndarray], illusion_type: str | None) -> dict[str, str]:
+def pair_types(illusion: Iterable[str], illusion_type: str | None) -> dict[str, str]:
     """{illusion mask name: its illusion type}. Annotations carry one type per frame today, so
     every pair gets the frame's type; a frame without one has no typed region."""
     return {name: illusion_type for name in illusion} if illusion_type else {}
