@@ -251,3 +251,30 @@ def test_migration_upgrades_a_populated_database(db_url: str) -> None:
         assert "prefilter_keep" not in list(conn.execute(text("SELECT * FROM frames LIMIT 0")).keys())
         assert conn.execute(text("SELECT count(*) FROM frames")).scalar() == 2500
     engine.dispose()
+
+
+@pytest.mark.parametrize("sparse", [False, True])
+def test_prefilter_claims_the_backlog_in_keyed_pages(sessions, monkeypatch: pytest.MonkeyPatch, sparse: bool) -> None:  # type: ignore[no-untyped-def]
+    from dataset.services import jobs as job_service
+    from dataset.services import prefilter
+
+    monkeypatch.setattr(prefilter, "CLAIM_PAGE", 3)  # pages end inside chunks and inside videos
+    with transaction(sessions) as s:
+        _seed(s, videos=3, per_video=21)
+    with transaction(sessions) as s:
+        backlog = s.execute(select(Frame.id, Frame.video_id).where(Frame.state == FrameState.ingested)
+                            .order_by(Frame.video_id, Frame.index)).all()
+        jobs = prefilter.launch_prefilter(s, lambda s_, kind, params, user: job_service.create_job(s_, kind, params, user),
+                                          None, chunk=2, sparse=sparse)
+    with sessions() as s:
+        claimed = [fid for job in jobs for fid in s.get(Job, job.id).params["frame_ids"]]
+        assert claimed == [fid for fid, _ in backlog]
+        if sparse:
+            by_video = {}
+            for fid, vid in backlog:
+                by_video.setdefault(vid, []).append(fid)
+            assert [s.get(Job, j.id).params["frame_ids"] for j in jobs] == list(by_video.values())
+        else:
+            assert [len(s.get(Job, j.id).params["frame_ids"]) for j in jobs][:-1] == [2] * (len(jobs) - 1)
+        owners = dict(s.execute(select(Frame.id, Frame.prefilter_job_id).where(Frame.state == FrameState.ingested)).all())
+        assert all(owners[fid] == job.id for job in jobs for fid in s.get(Job, job.id).params["frame_ids"])
