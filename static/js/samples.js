@@ -1,7 +1,7 @@
 // The samples grid: keyboard-first accept/reject of generated samples, filters, paging, and a way
 // into each sample's page and 3D preview. Decisions run one after another, in key order.
 import { api, el } from "./api.js";
-import { focusTile as focusGridTile, pageOffset, serial, stepOf } from "./grid.js";
+import { focusTile as focusGridTile, pageOffset, serial, setCursor, stepOf } from "./grid.js";
 import { keyFigures, reasonPicker, review } from "./sample_review.js";
 
 const $ = (id) => document.getElementById(id);
@@ -19,7 +19,7 @@ const THUMBS = ["masks", "disparity_after", "anaglyph"];
 const STEPS = { ArrowLeft: "left", h: "left", ArrowRight: "right", l: "right", ArrowUp: "up", k: "up",
                 ArrowDown: "down", j: "down" };
 
-const view = { items: [], total: 0, offset: 0, focus: 0 };
+const view = { items: [], total: 0, offset: 0, focus: 0, after: null, before: null, prev: null, next: null };
 const mine = new Map();  // sample id → the state this session's decisions left it in
 
 const enqueue = serial((err) => say(err.message, "error"));
@@ -29,6 +29,7 @@ const enqueue = serial((err) => say(err.message, "error"));
 function query() {
   const f = filters.elements;
   const params = new URLSearchParams({ limit: PAGE, offset: view.offset });
+  setCursor(params, view);
   if (f.state.value !== "all") params.set("state", f.state.value);
   if (f.flagged.value) params.set("flagged", f.flagged.value);
   return params;
@@ -36,7 +37,8 @@ function query() {
 
 async function load(focusId) {
   const page = await api(`${root.dataset.list}?${query()}`);
-  Object.assign(view, { items: page.items, total: page.total });
+  Object.assign(view, { items: page.items, total: page.total, prev: page.prev, next: page.next });
+  if (!page.prev) view.offset = 0;
   view.focus = Math.max(0, view.items.findIndex((s) => s.id === focusId));
   grid.replaceChildren(...page.items.map((s) => renderTile(el("li", { className: "tile", role: "listitem" }), s)));
   if (!page.items.length) {
@@ -45,8 +47,8 @@ async function load(focusId) {
   }
   $("samples-range").textContent = page.total
     ? `${view.offset + 1}–${view.offset + page.items.length} of ${page.total}` : "0 of 0";
-  $("prev-page").disabled = view.offset === 0;
-  $("next-page").disabled = view.offset + page.items.length >= page.total;
+  $("prev-page").disabled = !page.prev;
+  $("next-page").disabled = !page.next;
   history.replaceState(null, "", address());
   paint();
   focusTile();
@@ -60,6 +62,7 @@ function address() {
   if (f.flagged.value) params.set("flagged", f.flagged.value);
   if (f.thumb.value !== THUMBS[0]) params.set("thumb", f.thumb.value);
   if (view.offset) params.set("offset", view.offset);
+  setCursor(params, view);
   const focused = view.items[view.focus];
   if (focused && view.focus) params.set("focus", focused.id);
   return params.size ? `?${params}` : location.pathname;
@@ -124,7 +127,7 @@ function page(direction) {
   enqueue(async () => {
     const next = pageOffset(view, direction, PAGE, inFilter);
     if (typeof next === "string") return say(next);
-    view.offset = next;
+    Object.assign(view, next);
     await load();
   });
 }
@@ -243,7 +246,7 @@ for (const [id, run] of Object.entries(BUTTONS)) {
 
 filters.addEventListener("change", (event) => {
   if (event.target.name === "thumb") return showThumbs();
-  view.offset = 0;
+  Object.assign(view, { offset: 0, after: null, before: null });
   enqueue(() => load());
 });
 
@@ -253,6 +256,7 @@ function restore() {
     if (params.has(name)) filters.elements[name].value = params.get(name);
   }
   view.offset = Math.max(0, Number(params.get("offset")) || 0);
+  Object.assign(view, { after: params.get("after"), before: params.get("before") });
   return Number(params.get("focus")) || undefined;
 }
 
