@@ -33,6 +33,8 @@ class Settings(BaseSettings):
     database_url: str = Field("", description="SQLAlchemy URL; default SQLite (WAL) in the data dir.")
     queue_url: str = Field("", description="redis://… for Redis; default a SQLite queue in the data dir.")
     queue_name: str = Field("illusion-studio", description="Queue (Redis key prefix); workers of one deployment share it.")
+    queue_resend_after_s: float = Field(30.0, gt=0,
+                                        description="Workers re-send a queued job whose message is missing this long.")
     media_root: Path = Field(Path(), description="Content-addressed media store; default <home>/media.")
     host: str = "127.0.0.1"
     port: int = Field(5000, ge=1, le=65535)
