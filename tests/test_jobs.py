@@ -69,7 +69,8 @@ def test_sigkilled_worker_leaves_the_job_retryable(rt: Runtime, start_worker, tm
     job = wait_for(rt, job_id, lambda j: j.state == JobState.interrupted, timeout=30)
     assert "retry" in job.error
 
-    rt.queue.retry(job_id)
+    with transaction(rt.sessions) as s:
+        rt.queue.retry(s, job_id)
     job = wait_for(rt, job_id, lambda j: j.state.finished)
     assert job.state == JobState.succeeded, job.error
     assert job.attempts == 2

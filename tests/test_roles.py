@@ -31,6 +31,10 @@ EXPECTED: dict[str, Role | None] = {
     "samples.viser_client": Role.annotator,
     "samples.frame_preview": Role.annotator,
     "admin.create_user": Role.admin,
+    "admin.set_active": Role.admin,
+    "admin.set_role": Role.admin,
+    "admin.reset_password": Role.admin,
+    "admin.revoke_tokens": Role.admin,
     "media.serve": Role.annotator,
     "api.openapi": Role.annotator,
     "api.me": Role.annotator,
@@ -60,7 +64,7 @@ EXPECTED: dict[str, Role | None] = {
     "api.review_sample": Role.curator,
     "api.regenerate_sample": Role.curator,
 }
-SAMPLE_ARGS = {"job_id": "1", "frame_id": "1", "sample_id": "1", "view": "anaglyph", "asset": "index.html",
+SAMPLE_ARGS = {"user_id": "1", "job_id": "1", "frame_id": "1", "sample_id": "1", "view": "anaglyph", "asset": "index.html",
                "key": "ab/cd/" + "ab" * 32 + ".png"}
 CALLERS = ["anonymous", *(r.value for r in Role)]
 

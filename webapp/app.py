@@ -6,7 +6,7 @@ import secrets
 from pathlib import Path
 from typing import Any
 
-from flask import Flask, g, render_template
+from flask import Flask, g, make_response, render_template
 from flask_wtf.csrf import CSRFError
 from werkzeug.exceptions import HTTPException
 
@@ -15,6 +15,7 @@ from dataset.services.errors import ServiceError
 from webapp.auth import init_auth, is_api_request, json_error
 from webapp.runtime import Runtime
 from webapp.settings import Settings
+from webapp.throttle import init_throttle
 
 STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
 
@@ -28,6 +29,7 @@ def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
         MAX_CONTENT_LENGTH=settings.max_upload_mb * 1024 * 1024,
         SESSION_COOKIE_HTTPONLY=True,
         SESSION_COOKIE_SAMESITE="Lax",
+        SESSION_COOKIE_SECURE=settings.https,
     )
     app.json.sort_keys = False  # type: ignore[attr-defined]
     app.extensions["runtime"] = rt
@@ -42,6 +44,7 @@ def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
         if db is not None:
             db.close()
 
+    init_throttle(app, settings)
     init_auth(app)
 
     from webapp.api import api
@@ -78,4 +81,8 @@ def _register_errors(app: Flask) -> None:
 
     @app.errorhandler(HTTPException)
     def _http_error(exc: HTTPException) -> Any:
-        return render(exc.code or 500, exc.description or exc.name)
+        response = make_response(render(exc.code or 500, exc.description or exc.name))
+        for name, value in exc.get_headers():  # e.g. Retry-After of a 429
+            if name.lower() != "content-type":
+                response.headers[name] = value
+        return response

@@ -8,18 +8,24 @@ anything is refused rather than left open.
 from __future__ import annotations
 
 from collections.abc import Callable
+from datetime import timedelta
 from typing import Any, TypeVar
 
-from flask import Flask, abort, g, jsonify, redirect, request, url_for
-from flask_login import AnonymousUserMixin, LoginManager, UserMixin, current_user
+from flask import Flask, abort, g, jsonify, redirect, request, session, url_for
+from flask_login import AnonymousUserMixin, LoginManager, UserMixin, current_user, login_user, logout_user
 from flask_wtf.csrf import CSRFProtect
+from werkzeug.exceptions import TooManyRequests
 
 from dataset.models import Role, User
+from dataset.services import sessions as session_service
 from dataset.services import users as user_service
+from webapp import throttle
+from webapp.runtime import runtime
 
 F = TypeVar("F", bound=Callable[..., Any])
 PUBLIC = "public"
 ROLE_ATTR = "required_role"
+SESSION_ID = "sid"  # the cookie's key holding the server-side session's id
 
 login_manager = LoginManager()
 csrf = CSRFProtect()
@@ -71,6 +77,23 @@ def json_error(status: int, message: str) -> Any:
     return response
 
 
+def sign_in(user: User) -> None:
+    """Start a server-side session for ``user`` and put its id in the cookie."""
+    # A fresh random id per login: an id seen before (a copied cookie) never comes back to life.
+    session[SESSION_ID] = session_service.start_session(g.db, user)
+    g.db.commit()
+    login_user(SessionUser(user))
+
+
+def sign_out() -> None:
+    """End this browser's session on the server too, so a copy of the cookie is worthless."""
+    if sid := session.get(SESSION_ID):
+        session_service.end_session(g.db, sid)
+        g.db.commit()
+    logout_user()
+    session.pop(SESSION_ID, None)
+
+
 def init_auth(app: Flask) -> None:
     login_manager.init_app(app)
     login_manager.anonymous_user = Anonymous
@@ -82,16 +105,29 @@ def init_auth(app: Flask) -> None:
 
     @login_manager.user_loader
     def load_user(user_id: str) -> SessionUser | None:
-        user = g.db.get(User, int(user_id)) if user_id.isdigit() else None
-        return SessionUser(user) if user is not None and user.active else None
+        sid = session.get(SESSION_ID)
+        settings = runtime().settings
+        user = session_service.user_for_session(
+            g.db, sid, idle=timedelta(minutes=settings.session_idle_minutes),
+            lifetime=timedelta(hours=settings.session_lifetime_hours)) if isinstance(sid, str) else None
+        if g.db.dirty or g.db.deleted:
+            g.db.commit()  # the session's last-seen time, or its end
+        if user is None or str(user.id) != user_id:
+            session.pop(SESSION_ID, None)
+            return None
+        return SessionUser(user)
 
     @login_manager.request_loader
     def load_from_token(req: Any) -> SessionUser | None:
         scheme, _, token = req.headers.get("Authorization", "").partition(" ")
         if scheme.lower() != "bearer" or not token:
             return None
+        settings = runtime().settings
+        if (wait := throttle.token_blocked(settings)) is not None:
+            raise TooManyRequests("too many bad API tokens from this address", retry_after=wait)
         user = user_service.user_for_token(g.db, token.strip())
         if user is None:
+            throttle.count_bad_token(settings)
             return None
         if g.db.dirty:
             g.db.commit()  # keep the token's last-used time

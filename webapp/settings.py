@@ -12,7 +12,8 @@ import tomllib
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import Field, ValidationError, model_validator
+import limits
+from pydantic import Field, ValidationError, field_validator, model_validator
 from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, SettingsConfigDict
 
 ENV_PREFIX = "ILLUSION_STUDIO_"
@@ -33,11 +34,20 @@ class Settings(BaseSettings):
     database_url: str = Field("", description="SQLAlchemy URL; default SQLite (WAL) in the data dir.")
     queue_url: str = Field("", description="redis://… for Redis; default a SQLite queue in the data dir.")
     queue_name: str = Field("illusion-studio", description="Queue (Redis key prefix); workers of one deployment share it.")
+    queue_resend_after_s: float = Field(30.0, gt=0,
+                                        description="Workers re-send a queued job whose message is missing this long.")
     media_root: Path = Field(Path(), description="Content-addressed media store; default <home>/media.")
     host: str = "127.0.0.1"
     port: int = Field(5000, ge=1, le=65535)
     secret_key: str = Field("", description="Flask session key; default one generated into the data dir.")
     max_upload_mb: int = Field(2048, gt=0)
+    # Security: server-side sessions, login throttling (limits' syntax: "10 per 15 minutes"), HTTPS.
+    session_idle_minutes: int = Field(480, ge=1, description="A session unused this long ends.")
+    session_lifetime_hours: int = Field(72, ge=1, description="A session ends this long after its login.")
+    login_limit_per_account: str = Field("10 per 15 minutes", description="Failed logins per user name.")
+    login_limit_per_address: str = Field("50 per 15 minutes", description="Failed logins per client address.")
+    token_limit_per_address: str = Field("50 per 15 minutes", description="Bad API tokens per client address.")
+    https: bool = Field(False, description="Served over HTTPS (behind a proxy): Secure cookies, HSTS.")
     # Model backends: each has a weight-free default; the others load from a local directory.
     annotation_lease_s: int = Field(600, ge=30, description="How long a frame stays with an annotator without a renewal.")
     embedding_cache_mb: int = Field(2048, gt=0, description="Disk budget of the segmenter's embedding cache.")
@@ -78,6 +88,15 @@ class Settings(BaseSettings):
     ) -> tuple[PydanticBaseSettingsSource, ...]:
         # Init kwargs carry the TOML file's values, so the environment must rank above them.
         return env_settings, init_settings
+
+    @field_validator("login_limit_per_account", "login_limit_per_address", "token_limit_per_address")
+    @classmethod
+    def _rate_limit(cls, value: str) -> str:
+        try:
+            limits.parse(value)
+        except ValueError:
+            raise ValueError(f"{value!r} is not a rate limit like '10 per 15 minutes'") from None
+        return value
 
     @model_validator(mode="after")
     def _fill_paths(self) -> Settings:

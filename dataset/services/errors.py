@@ -17,3 +17,9 @@ class NotFound(ServiceError):
 
 class Conflict(ServiceError):
     status = 409
+
+
+class Unavailable(ServiceError):
+    """A service the request needs (the job queue) is down; try again later."""
+
+    status = 503

@@ -8,14 +8,16 @@ import secrets
 from datetime import timedelta
 from functools import cache
 
-from sqlalchemy import select
+from sqlalchemy import delete, func, select
 from sqlalchemy.orm import Session
 from werkzeug.security import check_password_hash, generate_password_hash
 
 from dataset.models import ApiToken, Role, User, utcnow
+from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
+from dataset.services.sessions import end_user_sessions
 
-_NAME = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
+_NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")  # always fullmatch: "$" would let "admin\n" through
 MIN_PASSWORD = 8
 
 
@@ -29,16 +31,22 @@ def parse_role(value: str) -> Role:
 def create_user(session: Session, name: str, role: Role | str, password: str) -> User:
     """Add a user; rejects bad names, short passwords, unknown roles and duplicates."""
     role = parse_role(role) if isinstance(role, str) else role
-    if not _NAME.match(name):
+    if not _NAME.fullmatch(name):
         raise InvalidInput("user name must be 1-64 letters, digits, '.', '_' or '-'")
-    if len(password) < MIN_PASSWORD:
-        raise InvalidInput(f"password must have at least {MIN_PASSWORD} characters")
-    if session.scalar(select(User.id).where(User.name == name)) is not None:
-        raise Conflict(f"user {name!r} already exists")
+    _check_password(password)
+    # Names are unique regardless of case: "Admin" next to "admin" would only mislead.
+    taken = session.scalar(select(User.name).where(func.lower(User.name) == name.lower()))
+    if taken is not None:
+        raise Conflict(f"user {taken!r} already exists" + (f" (names ignore case: {name!r})" if taken != name else ""))
     user = User(name=name, role=role, password_hash=generate_password_hash(password))
     session.add(user)
     session.flush()
     return user
+
+
+def _check_password(password: str) -> None:
+    if len(password) < MIN_PASSWORD:
+        raise InvalidInput(f"password must have at least {MIN_PASSWORD} characters")
 
 
 def get_user(session: Session, name: str) -> User:
@@ -87,3 +95,49 @@ def user_for_token(session: Session, token: str) -> User | None:
 def user_json(user: User) -> dict[str, object]:
     return {"id": user.id, "name": user.name, "role": user.role.value, "active": user.active,
             "created_at": user.created_at.isoformat() + "Z"}
+
+
+def _keep_an_admin(session: Session, user: User) -> None:
+    """Refuse a change that would leave no active admin."""
+    others = session.scalar(select(func.count()).select_from(User).where(
+        User.role == Role.admin, User.active.is_(True), User.id != user.id))
+    if user.role == Role.admin and user.active and not others:
+        raise Conflict(f"{user.name} is the last active admin; make another admin first")
+
+
+def set_active(session: Session, actor_id: int | None, user: User, active: bool) -> None:
+    """Deactivate (ending every session; tokens stop working) or reactivate ``user``; audited."""
+    if not active:
+        _keep_an_admin(session, user)
+        end_user_sessions(session, user.id)
+    user.active = active
+    audit.record(session, actor_id, "user.activate" if active else "user.deactivate", "user", user.id,
+                 name=user.name)
+
+
+def set_role(session: Session, actor_id: int | None, user: User, role: Role | str) -> None:
+    """Change ``user``'s role; ends their sessions so the new role applies from a fresh login; audited."""
+    role = parse_role(role) if isinstance(role, str) else role
+    if role == user.role:
+        return
+    if role != Role.admin:
+        _keep_an_admin(session, user)
+    audit.record(session, actor_id, "user.role", "user", user.id, name=user.name, old=user.role.value,
+                 new=role.value)
+    user.role = role
+    end_user_sessions(session, user.id)
+
+
+def reset_password(session: Session, actor_id: int | None, user: User, password: str) -> None:
+    """Set a new password and end every session of ``user``; audited (without the password)."""
+    _check_password(password)
+    user.password_hash = generate_password_hash(password)
+    end_user_sessions(session, user.id)
+    audit.record(session, actor_id, "user.password", "user", user.id, name=user.name)
+
+
+def revoke_tokens(session: Session, actor_id: int | None, user: User) -> int:
+    """Delete every API token of ``user``; returns how many; audited."""
+    count = session.execute(delete(ApiToken).where(ApiToken.user_id == user.id)).rowcount
+    audit.record(session, actor_id, "user.revoke_tokens", "user", user.id, name=user.name, tokens=count)
+    return count

@@ -100,5 +100,6 @@ def get_job(job_id: int) -> ResponseReturnValue:
 @api.post("/jobs/<int:job_id>/retry")
 @requires(Role.curator)
 def retry_job(job_id: int) -> ResponseReturnValue:
-    job = runtime().queue.retry(job_id)
+    job = runtime().queue.retry(g.db, job_id)
+    g.db.commit()
     return job_service.job_json(job), 202

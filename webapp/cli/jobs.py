@@ -64,8 +64,8 @@ def list_jobs(state: CliState, state_filter: str | None, as_json: bool) -> None:
 @pass_state
 def retry(state: CliState, job_id: int) -> None:
     """Queue a failed or interrupted job again."""
-    with service_errors():
-        state.runtime.queue.retry(job_id)
+    with service_errors(), transaction(state.runtime.sessions) as s:
+        state.runtime.queue.retry(s, job_id)
     click.echo(f"job {job_id} queued again")
 
 

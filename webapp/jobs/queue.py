@@ -4,15 +4,18 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
+from collections.abc import Callable, Collection
 from typing import TYPE_CHECKING, Any
 
 from huey import Huey, RedisHuey, SqliteHuey
-from sqlalchemy import event
-from sqlalchemy.orm import Session
+from sqlalchemy import event, select
+from sqlalchemy.orm import Session, sessionmaker
 
 from dataset.db import transaction
-from dataset.models import Job, User
+from dataset.models import Job, JobState, User
 from dataset.services import jobs as job_rows
+from dataset.services.errors import Unavailable
 from webapp.jobs.handlers import HANDLERS
 
 if TYPE_CHECKING:
@@ -30,6 +33,47 @@ def make_huey(queue_url: str, sqlite_path: str, name: str) -> Huey:
     return SqliteHuey(name, filename=sqlite_path, results=False)
 
 
+def check_reachable(huey: Huey) -> None:
+    """Raise :class:`Unavailable` when the queue's storage cannot be read (Redis down, broken file)."""
+    try:
+        huey.storage.queue_size()
+    except Exception as exc:  # redis.ConnectionError, sqlite3.DatabaseError, OSError …: all mean "down"
+        raise Unavailable(f"the job queue is unreachable ({type(exc).__name__}); try again in a minute") from None
+
+
+def pending_job_ids(huey: Huey) -> set[int]:
+    """Job ids of the messages waiting in ``huey``'s queue."""
+    return {int(task.args[0]) for task in huey.pending() if task.args}
+
+
+class UnsentSweep:
+    """Re-sends ``queued`` rows whose message is missing from one queue (lost in a queue outage).
+
+    A row counts as unsent once two sweeps at least ``grace_s`` apart both found it queued with no
+    message; the grace covers a message a worker has just taken but not yet claimed. Re-sending is
+    safe because :func:`dataset.services.jobs.execute_job` claims with a compare-and-swap: a job
+    sent twice still runs once. One sweep per queue name, over the kinds that queue carries.
+    """
+
+    def __init__(self, huey: Huey, send: Callable[[int], Any], kinds: Collection[str], grace_s: float) -> None:
+        self.huey, self.send, self.kinds, self.grace_s = huey, send, tuple(kinds), grace_s
+        self._missing_since: dict[int, float] = {}
+
+    def __call__(self, sessions: sessionmaker[Session]) -> list[int]:
+        """One sweep; returns the ids sent again."""
+        now = time.monotonic()
+        # Rows first, then messages: a row committed in between was enqueued before we look.
+        with sessions() as s:
+            queued = set(s.scalars(select(Job.id).where(Job.state == JobState.queued, Job.kind.in_(self.kinds))))
+        missing = queued - pending_job_ids(self.huey)
+        self._missing_since = {j: self._missing_since.get(j, now) for j in missing}
+        due = sorted(j for j, since in self._missing_since.items() if now - since >= self.grace_s)
+        for job_id in due:
+            self.send(job_id)
+            del self._missing_since[job_id]
+        return due
+
+
 class JobQueue:
     """Creates job rows and hands their ids to Huey; runs them in workers."""
 
@@ -38,41 +82,59 @@ class JobQueue:
         s = runtime.settings
         self.huey = make_huey(s.queue_url, str(s.queue_path), s.queue_name)
         self._run = self.huey.task(name="run_job")(self._execute)
+        self.sweep = UnsentSweep(self.huey, self._run, HANDLERS, s.queue_resend_after_s)
 
     def submit(self, session: Session, kind: str, params: dict[str, Any], user: User | None) -> Job:
         """Create the row in the caller's transaction; enqueue once it commits.
 
-        Enqueueing after commit means a worker never sees an id whose row is not there yet.
+        Raises :class:`Unavailable` (503) while the queue is down, before any row is written.
+        Enqueueing after commit means a worker never sees an id whose row is not there yet; a
+        message lost between the commit and the queue is re-sent by the workers' sweep.
         """
         if kind not in HANDLERS:
             raise ValueError(f"unknown job kind {kind!r}")
+        check_reachable(self.huey)
         job = job_rows.create_job(session, kind, params, user)
-        job_id = job.id
-        event.listen(session, "after_commit", lambda _s: self._run(job_id), once=True)
+        self._send_after_commit(session, job.id)
         return job
 
-    def retry(self, job_id: int) -> Job:
-        with transaction(self.runtime.sessions) as s:
-            job = job_rows.mark_for_retry(s, job_id)
-        self._run(job_id)
+    def retry(self, session: Session, job_id: int) -> Job:
+        """Put a failed or interrupted job back in the queue, in the caller's transaction."""
+        check_reachable(self.huey)
+        job = job_rows.mark_for_retry(session, job_id)
+        self._send_after_commit(session, job_id)
         return job
+
+    def _send_after_commit(self, session: Session, job_id: int) -> None:
+        def send(_session: Session) -> None:
+            try:
+                self._run(job_id)
+            except Exception:  # the row is committed; the sweep re-sends it once the queue is back
+                log.warning("job %s is saved but could not be queued; a worker will re-send it", job_id,
+                            exc_info=True)
+
+        event.listen(session, "after_commit", send, once=True)
 
     def _execute(self, job_id: int) -> str:
         return job_rows.execute_job(job_id, HANDLERS, self.runtime).value
 
     def run_worker(self, concurrency: int = 1) -> None:
-        """Run a consumer until SIGINT/SIGTERM, with a heartbeat thread that also reaps lost jobs."""
+        """Run a consumer until SIGINT/SIGTERM, with a heartbeat thread that also reaps lost jobs
+        and re-sends queued jobs whose message was lost."""
         me = job_rows.worker_id()
         self._reap()
         stop = threading.Event()
+        interval = min(job_rows.HEARTBEAT_S, max(self.sweep.grace_s / 2, 0.5))
 
         def beat() -> None:
-            while not stop.wait(job_rows.HEARTBEAT_S):
+            while not stop.wait(interval):
                 try:
                     with transaction(self.runtime.sessions) as s:
                         job_rows.heartbeat(s, me)
                     self._reap()
-                except Exception:  # a DB hiccup must not kill the heartbeat
+                    for job_id in self.sweep(self.runtime.sessions):
+                        log.warning("job %s was queued without a message; sent it again", job_id)
+                except Exception:  # a DB or queue hiccup must not kill the heartbeat
                     log.exception("heartbeat failed")
 
         threading.Thread(target=beat, name="heartbeat", daemon=True).start()

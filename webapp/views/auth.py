@@ -6,13 +6,13 @@ from urllib.parse import urlsplit
 
 from flask import Blueprint, flash, g, redirect, render_template, request, url_for
 from flask.typing import ResponseReturnValue
-from flask_login import login_user, logout_user
 from sqlalchemy import select
 
 from dataset.models import Role
 from dataset.services import users as user_service
-from webapp.auth import SessionUser, public, requires
+from webapp.auth import public, requires, sign_in, sign_out
 from webapp.forms import LoginForm
+from webapp.throttle import limit_login
 
 bp = Blueprint("auth", __name__)
 
@@ -26,12 +26,13 @@ def healthz() -> ResponseReturnValue:
 
 @bp.route("/login", methods=["GET", "POST"])
 @public
+@limit_login
 def login() -> ResponseReturnValue:
     form = LoginForm()
     if form.validate_on_submit():
         user = user_service.authenticate(g.db, form.name.data, form.password.data)
         if user is not None:
-            login_user(SessionUser(user))
+            sign_in(user)
             return redirect(_safe_next(request.args.get("next")))
         flash("Wrong user name or password.", "error")
         return render_template("login.html", form=form), 401
@@ -52,6 +53,6 @@ def _safe_next(target: str | None) -> str:
 @bp.post("/logout")
 @requires(Role.annotator)
 def logout() -> ResponseReturnValue:
-    logout_user()
+    sign_out()
     flash("Logged out.", "info")
     return redirect(url_for("auth.login"))

@@ -1,0 +1,168 @@
+"""Server-side sessions that end, login throttling, and admins managing accounts."""
+
+from __future__ import annotations
+
+from datetime import timedelta
+
+from click.testing import CliRunner
+from sqlalchemy import select, update
+
+from dataset.db import transaction
+from dataset.models import AuditEntry, Role, User, UserSession, utcnow
+from dataset.services import users as user_service
+from tests.conftest import PASSWORD, csrf_from, login
+from webapp.cli import main as cli
+
+
+def user_id(runtime, name: str) -> int:  # type: ignore[no-untyped-def]
+    with runtime.sessions() as s:
+        return user_service.get_user(s, name).id
+
+
+def test_a_cookie_saved_before_logout_is_worthless_after_it(app, client) -> None:  # type: ignore[no-untyped-def]
+    login(client, "curator")
+    saved = client.get_cookie("session").value
+    assert client.get("/api/v1/me").status_code == 200
+    token = csrf_from(client.get("/").get_data(as_text=True))
+    assert client.post("/logout", data={"csrf_token": token}).status_code == 302
+    thief = app.test_client()
+    thief.set_cookie("session", saved)
+    assert thief.get("/api/v1/me").status_code == 401
+    assert thief.post("/api/v1/review/bulk", json={"items": [], "decision": "approve"}).status_code in (400, 401)
+
+
+def test_password_reset_role_change_and_deactivation_end_sessions(app, runtime) -> None:  # type: ignore[no-untyped-def]
+    uid = user_id(runtime, "annotator")
+    changes = [lambda s, u: user_service.reset_password(s, None, u, "another-password"),
+               lambda s, u: user_service.set_role(s, None, u, Role.curator),
+               lambda s, u: user_service.set_active(s, None, u, False)]
+    for change in changes:
+        with transaction(runtime.sessions) as s:
+            user = s.get(User, uid)
+            user.active, user.password_hash = True, user_service.generate_password_hash(PASSWORD)
+        client = app.test_client()
+        login(client, "annotator")
+        assert client.get("/api/v1/me").status_code == 200
+        with transaction(runtime.sessions) as s:
+            change(s, s.get(User, uid))
+        assert client.get("/api/v1/me").status_code == 401  # on the very next request
+
+
+def test_idle_and_absolute_lifetimes_end_a_session(client, runtime) -> None:  # type: ignore[no-untyped-def]
+    idle = timedelta(minutes=runtime.settings.session_idle_minutes + 1)
+    lifetime = timedelta(hours=runtime.settings.session_lifetime_hours + 1)
+    for column, age in ((UserSession.last_seen_at, idle), (UserSession.created_at, lifetime)):
+        login(client, "annotator")
+        assert client.get("/api/v1/me").status_code == 200
+        with transaction(runtime.sessions) as s:
+            s.execute(update(UserSession).values({column: utcnow() - age}))
+        assert client.get("/api/v1/me").status_code == 401
+        with runtime.sessions() as s:
+            assert s.scalars(select(UserSession)).all() == []  # the ended row is gone
+
+
+def test_wrong_passwords_are_throttled_per_account_with_retry_after(app, client) -> None:  # type: ignore[no-untyped-def]
+    for _ in range(10):
+        assert login(client, "admin", "wrong-password").status_code == 401
+    response = login(client, "admin")  # the right password, too late
+    assert response.status_code == 429 and int(response.headers["Retry-After"]) > 0
+    assert "too many failed logins" in response.get_data(as_text=True)
+    assert login(client, "curator").status_code == 302  # another account from the same address still logs in
+
+
+def test_wrong_passwords_are_throttled_per_address(app, client, runtime) -> None:  # type: ignore[no-untyped-def]
+    with transaction(runtime.sessions) as s:
+        for i in range(12):
+            user_service.create_user(s, f"user{i}", Role.annotator, PASSWORD)
+    for i in range(50):
+        assert login(client, f"user{i % 12}", "wrong-password").status_code == 401
+    response = login(client, "curator")
+    assert response.status_code == 429 and "from this address" in response.get_data(as_text=True)
+    assert int(response.headers["Retry-After"]) > 0
+
+
+def test_bad_api_tokens_are_throttled_per_address(client, tokens) -> None:  # type: ignore[no-untyped-def]
+    for _ in range(50):
+        assert client.get("/api/v1/me", headers={"Authorization": "Bearer ist_guess"}).status_code == 401
+    response = client.get("/api/v1/me", headers={"Authorization": f"Bearer {tokens['admin']}"})
+    assert response.status_code == 429 and int(response.headers["Retry-After"]) > 0
+    assert "too many bad API tokens" in response.json["error"]
+
+
+def test_the_throttle_counts_across_processes_in_one_sqlite_file(runtime) -> None:  # type: ignore[no-untyped-def]
+    from limits import parse
+    from limits.strategies import FixedWindowRateLimiter
+
+    from webapp.throttle import SqliteLimitStorage, storage_uri
+
+    uri = storage_uri(runtime.settings)
+    one, two = FixedWindowRateLimiter(SqliteLimitStorage(uri)), FixedWindowRateLimiter(SqliteLimitStorage(uri))
+    item = parse("3 per minute")
+    assert one.hit(item, "k") and two.hit(item, "k") and one.hit(item, "k")
+    assert not two.hit(item, "k")  # the second "process" sees the first one's hits
+    assert not one.test(item, "k") and one.test(item, "other")
+
+
+def admin_post(client, path: str, **data: str):  # type: ignore[no-untyped-def]
+    token = csrf_from(client.get("/admin/users").get_data(as_text=True))
+    return client.post(path, data={"csrf_token": token, **data})
+
+
+def test_admins_manage_accounts_from_the_users_page(app, client, runtime, tokens) -> None:  # type: ignore[no-untyped-def]
+    login(client, "admin")
+    uid = user_id(runtime, "curator")
+    assert admin_post(client, f"/admin/users/{uid}/role", role="annotator").status_code == 302
+    assert admin_post(client, f"/admin/users/{uid}/password", password="a-new-password").status_code == 302
+    assert login(app.test_client(), "curator", "a-new-password").status_code == 302
+    assert admin_post(client, f"/admin/users/{uid}/tokens/revoke").status_code == 302
+    script = app.test_client()  # no session cookie: the token alone
+    assert script.get("/api/v1/me", headers={"Authorization": f"Bearer {tokens['curator']}"}).status_code == 401
+    assert admin_post(client, f"/admin/users/{uid}/active", active="0").status_code == 302
+    assert login(app.test_client(), "curator", "a-new-password").status_code == 401
+    assert admin_post(client, f"/admin/users/{uid}/active", active="1").status_code == 302
+    assert admin_post(client, f"/admin/users/{uid}/password", password="short").status_code == 400
+    page = client.get("/admin/users").get_data(as_text=True)
+    assert "Reset password" in page and "Revoke API tokens" in page
+    assert client.post(f"/admin/users/{uid}/active", data={"active": "0"}).status_code == 400  # no CSRF token
+    with runtime.sessions() as s:
+        actions = [e.action for e in s.scalars(select(AuditEntry).where(AuditEntry.target_id == uid))]
+        assert actions == ["user.role", "user.password", "user.revoke_tokens", "user.deactivate", "user.activate"]
+        assert all(e.user_id == user_id(runtime, "admin") for e in s.scalars(select(AuditEntry)))
+        assert s.get(User, uid).role == Role.annotator
+
+
+def test_the_last_admin_cannot_be_removed(client, runtime) -> None:  # type: ignore[no-untyped-def]
+    login(client, "admin")
+    uid = user_id(runtime, "admin")
+    response = admin_post(client, f"/admin/users/{uid}/active", active="0")
+    assert response.status_code == 409 and "last active admin" in response.get_data(as_text=True)
+    assert admin_post(client, f"/admin/users/{uid}/role", role="curator").status_code == 409
+    with transaction(runtime.sessions) as s:
+        user_service.set_role(s, None, user_service.get_user(s, "curator"), Role.admin)
+    assert admin_post(client, f"/admin/users/{uid}/role", role="curator").status_code == 302
+
+
+def test_the_cli_manages_accounts(settings, runtime, tokens) -> None:  # type: ignore[no-untyped-def]
+    runner = CliRunner()
+    base = ["--data-dir", str(settings.home), "users"]
+    assert runner.invoke(cli, [*base, "role", "annotator", "curator"]).exit_code == 0
+    result = runner.invoke(cli, [*base, "password", "annotator", "--password-stdin"], input="brand-new-pass\n")
+    assert result.exit_code == 0, result.output
+    assert "revoked 1 token(s)" in runner.invoke(cli, [*base, "revoke-tokens", "annotator"]).output
+    assert runner.invoke(cli, [*base, "deactivate", "annotator"]).exit_code == 0
+    assert "disabled" in runner.invoke(cli, [*base, "list"]).output
+    assert runner.invoke(cli, [*base, "reactivate", "annotator"]).exit_code == 0
+    result = runner.invoke(cli, [*base, "deactivate", "admin"])
+    assert result.exit_code != 0 and "last active admin" in result.output
+    with runtime.sessions() as s:
+        user = user_service.get_user(s, "annotator")
+        assert user.role == Role.curator and user.active
+        assert user_service.authenticate(s, "annotator", "brand-new-pass") is not None
+        assert len(s.scalars(select(AuditEntry)).all()) == 5
+
+
+def test_user_names_are_whole_matches_and_unique_ignoring_case(client, tokens) -> None:  # type: ignore[no-untyped-def]
+    auth = {"Authorization": f"Bearer {tokens['admin']}"}
+    for name, status in (("admin\n", 400), ("Admin", 409), ("new.user", 201), ("NEW.USER", 409)):
+        response = client.post("/api/v1/users", json={"name": name, "role": "admin", "password": PASSWORD}, headers=auth)
+        assert response.status_code == status, (name, response.json)
