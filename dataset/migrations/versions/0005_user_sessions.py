@@ -1,14 +1,14 @@
 """server-side sessions
 
 Revision ID: 0005
-Revises: 0001 (the lead re-chains it onto 0004)
+Revises: 0002
 """
 
 import sqlalchemy as sa
 from alembic import op
 
 revision = "0005"
-down_revision = "0001"
+down_revision = "0002"
 branch_labels = None
 depends_on = None
 
