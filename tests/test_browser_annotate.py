@@ -108,7 +108,8 @@ def test_annotator_clicks_pairs_submits_and_a_second_annotator_works_alongside(b
         picture = truth(home, frame["index"], "illusion_00")
         click_image(page, *interior(picture))
         page.wait_for_function("window.annotator.pairs[0].illusion > 0")
-        expect(page.locator("#timing")).to_have_text(re.compile(r"^mask in \d+ ms$"))
+        # "mask in 48 ms", or seconds on a loaded machine: only that a figure is shown matters here
+        expect(page.locator("#timing")).to_have_text(re.compile(r"^mask in (\d+ ms|\d+(\.\d+)? s)$"))
         expect(page.locator("[data-pair='1'] [data-chip=illusion]")).to_have_attribute("data-done", "yes")
 
         # a reload before the draft reached the server brings the work back from this browser
