@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -34,24 +35,9 @@ class DepthAnythingBackend:
     name = "depth-anything-v2"
 
     def __init__(self, model_path: Path, device: str = "cpu") -> None:
-        checkpoint = open_checkpoint(model_path, "Depth Anything", {"depth_anything"})
-        self.model_path = checkpoint.path
-        if checkpoint.config.get("depth_estimation_type", "relative") != "relative":
-            raise ValueError(f"{self.model_path / CONFIG_FILE} is a metric-depth checkpoint; "
-                             "a relative (disparity) one is needed")
-        try:
-            self.device = torch.device(device)
-        except RuntimeError as exc:
-            raise ValueError(f"bad torch device {device!r}: {exc}") from None
-        self.model_id = checkpoint.model_id(self.name)
-        try:
-            self.model = AutoModelForDepthEstimation.from_pretrained(self.model_path).to(self.device).eval()
-            if (self.model_path / PROCESSOR_FILE).is_file():
-                self.processor = AutoImageProcessor.from_pretrained(self.model_path, backend="pil")
-            else:
-                self.processor = DPTImageProcessorPil(**_RELEASED_PROCESSOR)
-        except (OSError, ValueError) as exc:
-            raise ValueError(f"cannot load Depth Anything from {self.model_path}: {exc}") from exc
+        self.model_path = Path(model_path)
+        self.model, self.processor, self.model_id = load_depth_anything(self.model_path, device)
+        self.device = self.model.device
         # The backbone only sees whole patches: whatever the processor config says, keep sides multiples of it.
         self._multiple = math.lcm(int(self.processor.ensure_multiple_of or 1), int(self.model.config.patch_size))
 
@@ -69,3 +55,25 @@ class DepthAnythingBackend:
             [result] = self.processor.post_process_depth_estimation(outputs, target_sizes=[(height, width)])
         return result["predicted_depth"].float().cpu().numpy().reshape(height, width)
 
+
+
+def load_depth_anything(model_path: Path, device: str = "cpu") -> tuple[Any, Any, str]:
+    """(model in eval mode on ``device``, its PIL image processor, model id) from a local relative-depth
+    Depth Anything checkpoint directory; ValueError (one line) naming the directory otherwise."""
+    checkpoint = open_checkpoint(model_path, "Depth Anything", {"depth_anything"})
+    model_path = checkpoint.path
+    if checkpoint.config.get("depth_estimation_type", "relative") != "relative":
+        raise ValueError(f"{model_path / CONFIG_FILE} is a metric-depth checkpoint; a relative (disparity) one is needed")
+    try:
+        torch_device = torch.device(device)
+    except RuntimeError as exc:
+        raise ValueError(f"bad torch device {device!r}: {exc}") from None
+    try:
+        model = AutoModelForDepthEstimation.from_pretrained(model_path).to(torch_device).eval()
+        if (model_path / PROCESSOR_FILE).is_file():
+            processor = AutoImageProcessor.from_pretrained(model_path, backend="pil")
+        else:
+            processor = DPTImageProcessorPil(**_RELEASED_PROCESSOR)
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"cannot load Depth Anything from {model_path}: {exc}") from exc
+    return model, processor, checkpoint.model_id(DepthAnythingBackend.name)
