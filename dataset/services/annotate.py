@@ -13,7 +13,6 @@ from collections.abc import Sequence
 from datetime import datetime, timedelta
 from functools import lru_cache
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any
 
 import cv2
@@ -33,6 +32,7 @@ from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.frames import update_frame
 from dataset.services.jobs import JobContext
+from dataset.settings import Settings
 
 ANNOTATABLE = (FrameState.approved,)
 DELETE_REASONS = ("redundant", "imperceptible")
@@ -94,8 +94,9 @@ def _ensure_annotation_row(session: Session, frame_id: int) -> None:
                     .on_conflict_do_nothing(index_elements=["frame_id"]))
 
 
-def _held_by_other(ann: Annotation, user: User | Any) -> bool:
-    return (ann.lease_user_id not in (None, user.id) and ann.lease_expires_at is not None
+def _held_by_other(ann: Annotation, user_id: int | None) -> bool:
+    """Someone other than ``user_id`` holds an unexpired lease on ``ann``."""
+    return (ann.lease_user_id not in (None, user_id) and ann.lease_expires_at is not None
             and ann.lease_expires_at > utcnow())
 
 
@@ -139,7 +140,7 @@ def frame_detail(session: Session, frame_id: int, user: User | Any) -> dict[str,
                                  .order_by(Frame.index)).all()
     ids = [i for i, _ in neighbours]
     pos = ids.index(frame.id) if frame.id in ids else -1
-    held_by_other = ann is not None and _held_by_other(ann, user)
+    held_by_other = ann is not None and _held_by_other(ann, user.id)
     return {
         "id": frame.id, "video_id": frame.video_id, "index": frame.index, "time_s": frame.time_s,
         "width": frame.width, "height": frame.height, "state": frame.state.value, "revision": frame.revision,
@@ -174,7 +175,7 @@ def save_annotation(session: Session, frame_id: int, user: User | Any, *, versio
                      f"now {ann.version}); reload to see it")
     if version != ann.version:
         raise stale
-    if _held_by_other(ann, user):
+    if _held_by_other(ann, user.id):
         raise Conflict(f"frame {frame_id} is being annotated by someone else")
     kind = _parse_type(illusion_type) if illusion_type else None
     parsed = _parse_regions(regions, frame.height, frame.width, require_illusion=submit)
@@ -250,7 +251,7 @@ def delete_frame(session: Session, frame_id: int, user: User | Any, reason: str)
     if frame.state not in ANNOTATABLE:
         raise Conflict(f"frame {frame_id} is {frame.state.value}; only approved frames can be deleted here")
     ann = session.scalar(select(Annotation).where(Annotation.frame_id == frame_id))
-    if ann is not None and _held_by_other(ann, user):
+    if ann is not None and _held_by_other(ann, user.id):
         raise Conflict(f"frame {frame_id} is being annotated by someone else")
     before = frame.state
     update_frame(session, frame, state=FrameState.deleted)
@@ -270,12 +271,12 @@ def segmenter_for(name: str, model_path: str | None, device: str) -> Segmenter:
         raise InvalidInput(str(exc)) from None
 
 
-def settings_segmenter(settings: Any) -> Segmenter:
+def settings_segmenter(settings: Settings) -> Segmenter:
     path = str(settings.sam2_model_path) if settings.sam2_model_path else None
     return segmenter_for(settings.segmenter, path, settings.device)
 
 
-def embedding_cache(settings: Any) -> EmbeddingCache:
+def embedding_cache(settings: Settings) -> EmbeddingCache:
     return EmbeddingCache(settings.cache_dir / "embeddings", settings.embedding_cache_mb * 1024 * 1024)
 
 
@@ -286,11 +287,11 @@ def load_rgb(media: MediaStore, key: str) -> np.ndarray:
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
 
 
-def embedding_ready(settings: Any, frame: Frame) -> bool:
+def embedding_ready(settings: Settings, frame: Frame) -> bool:
     return embedding_cache(settings).get(frame.content_sha256, settings_segmenter(settings).model_id) is not None
 
 
-def segment(settings: Any, media: MediaStore, frame: Frame, body: dict[str, Any]) -> dict[str, Any]:
+def segment(settings: Settings, media: MediaStore, frame: Frame, body: dict[str, Any]) -> dict[str, Any]:
     """Clicks (and an optional box / previous mask) → the best mask as COCO RLE, with its score."""
     try:
         points = np.asarray(body.get("points") or [], dtype=np.float64).reshape(-1, 2)
@@ -327,7 +328,7 @@ _HOT_LOCK = threading.Lock()
 _HOT_SIZE = 8  # embeddings kept decoded in memory: an annotator's current and next frames, several annotators
 
 
-def _hot_embedding(settings: Any, segmenter: Segmenter, frame: Frame, media: MediaStore) -> tuple[Embedding, bool]:
+def _hot_embedding(settings: Settings, segmenter: Segmenter, frame: Frame, media: MediaStore) -> tuple[Embedding, bool]:
     """The frame's embedding from memory, else the disk cache, else encoded now.
 
     Reading a SAM2 embedding from disk costs tens of milliseconds at 1080p, every click; an
@@ -348,7 +349,7 @@ def _hot_embedding(settings: Any, segmenter: Segmenter, frame: Frame, media: Med
     return embedding, cached
 
 
-def encode_frames(settings: Any, media: MediaStore, frames: Sequence[Frame]) -> int:
+def encode_frames(settings: Settings, media: MediaStore, frames: Sequence[Frame]) -> int:
     """Compute and cache embeddings for frames that lack one; returns how many were computed."""
     segmenter, cache, done = settings_segmenter(settings), embedding_cache(settings), 0
     for frame in frames:
@@ -391,7 +392,7 @@ def propagate_job(ctx: JobContext) -> dict[str, Any]:
         with transaction(ctx.sessions) as s:
             _ensure_annotation_row(s, frame.id)
             ann = s.scalar(select(Annotation).where(Annotation.frame_id == frame.id).with_for_update())
-            if ann.submitted or _held_by_other(ann, SimpleNamespace(id=p.get("user_id"))):
+            if ann.submitted or _held_by_other(ann, p.get("user_id")):
                 skipped.append(frame.id)
                 continue
             # The same compare-and-swap as a person's save: a save that lands meanwhile wins.
