@@ -20,7 +20,7 @@ from flask_limiter.util import get_remote_address
 from limits import RateLimitItem, parse
 from limits.storage import Storage
 
-from webapp.settings import Settings
+from dataset.settings import Settings
 
 limiter = Limiter(key_func=get_remote_address)
 

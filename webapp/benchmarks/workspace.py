@@ -12,9 +12,9 @@ from dataset.models import Frame, FrameState
 from dataset.services import jobs as job_service
 from dataset.services import users as user_service
 from dataset.services.ingest import ingest_params
+from dataset.settings import load_settings
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime
-from webapp.settings import load_settings
 
 
 def approved_frame_workspace(home: Path, scene: Path, **settings: Any) -> tuple[Runtime, int, int]:
