@@ -110,11 +110,12 @@ class StepBatches(Sampler[list[SampleKey]]):
 
 
 def collate(items: list[Batch]) -> Batch:
-    """Stack the tensors of ``items``; ``noise_seed`` and ``name`` stay lists."""
-    with_mono = sum("mono" in item for item in items)
-    if 0 < with_mono < len(items):
-        raise ValueError("some samples carry a mono disparity and others do not; use one kind of data")
-    out: Batch = {key: torch.stack([item[key] for item in items]) for key in items[0] if key not in ("noise_seed", "name")}
+    """Stack the tensors of ``items``; ``mono`` (1×H×W or None per sample: a batch may mix samples
+    with and without one, since every sample is its own forward pass), ``noise_seed`` and ``name``
+    stay lists."""
+    lists = ("mono", "noise_seed", "name")
+    out: Batch = {key: torch.stack([item[key] for item in items]) for key in items[0] if key not in lists}
+    out["mono"] = [item.get("mono") for item in items]
     out["noise_seed"] = [item["noise_seed"] for item in items]
     out["name"] = [item["name"] for item in items]
     return out

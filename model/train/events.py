@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import time
 from pathlib import Path
 from typing import Any
 
@@ -16,8 +17,9 @@ TENSORBOARD_DIR = "tensorboard"
 
 
 def append_event(run_dir: Path, event: dict[str, Any]) -> None:
-    """Append one event line and sync it: a reader sees whole lines, and a crash loses none."""
-    line = json.dumps(_finite(event), separators=(",", ":")) + "\n"
+    """Append one event line, stamped with ``time`` (Unix seconds), and sync it: a reader sees
+    whole lines, and a crash loses none."""
+    line = json.dumps(_finite({**event, "time": round(time.time(), 3)}), separators=(",", ":")) + "\n"
     with open(run_dir / PROGRESS_FILE, "a", encoding="utf-8") as fh:
         fh.write(line)
         fh.flush()

@@ -200,7 +200,7 @@ class Trainer:
         cfg, world, device = self.config.train, self.world, self.device
         left, right = batch["left"].to(device), batch["right"].to(device)
         gt, valid = batch["disparity"].to(device), batch["valid"].to(device)
-        mono = batch["mono"].to(device) if "mono" in batch else None
+        mono = [None if m is None else m[None].to(device) for m in batch["mono"]]
         counted = loss_pixels(gt, valid, cfg.max_disparity)
         total = all_sum(world, counted.sum().to(torch.float64)).to(torch.float32).clamp_min(1.0)
         self.optimizer.zero_grad(set_to_none=True)
@@ -213,7 +213,7 @@ class Trainer:
             with sync:
                 noise = torch.Generator(device=device).manual_seed(batch["noise_seed"][j])
                 with torch.autocast(device.type, dtype=torch.float16, enabled=self.amp):
-                    out = self.model(left[j:j + 1], right[j:j + 1], None if mono is None else mono[j:j + 1],
+                    out = self.model(left[j:j + 1], right[j:j + 1], mono[j],
                                      iters=cfg.train_iters, noise=noise)
                 loss, parts = fusion_loss(_float(out), gt[j:j + 1], valid[j:j + 1], cfg, valid_total=total)
                 self.scaler.scale(loss * world.size).backward()
