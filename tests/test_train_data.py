@@ -31,8 +31,8 @@ def test_a_folder_split_is_the_named_samples_in_order(native: Path, tmp_path: Pa
     spec = read_run(make_run(tmp_path / "run", native))
     names = split_names(native)
     train = open_split(spec, "train")
-    assert isinstance(train, Subset) and train.names == names["train"] and len(train) == 3
-    assert [train[i].name for i in range(3)] == names["train"]
+    assert isinstance(train, Subset) and train.names == names["train"] and len(train) >= 2
+    assert [train[i].name for i in range(len(train))] == names["train"]
     assert open_split(spec, "val").names == names["val"]
 
 
@@ -83,7 +83,7 @@ def test_sample_tensors_zero_invalid_ground_truth(native: Path) -> None:
 @pytest.mark.slow
 def test_a_run_over_a_pinned_dataset_version(source: Runtime, tmp_path: Path) -> None:
     with source.sessions() as s:
-        version = pin_dataset_version(s, source.media)
+        version = pin_dataset_version(s, source.media, kinds=["synthesized"])  # they carry a mono disparity
     splits = split_by_video(version, {"train": 0.75, "val": 0.25}, seed=1)
     config = load_preset("lite", {**OVERRIDES, "steps": 2, "val_every": 2, "checkpoint_every": 2})
     run = tmp_path / "run"
