@@ -154,6 +154,14 @@ class Trainer:
     # --- the run -------------------------------------------------------------------------------
 
     def run(self) -> Outcome:
+        """Train from ``step`` to the configured steps; the outcome (an exception is a failure)."""
+        try:
+            return self._run()
+        finally:
+            if self.board is not None:
+                self.board.close()
+
+    def _run(self) -> Outcome:
         cfg = self.config.train
         world = self.world
         batches = training_loader(self.train_reader, cfg, start=self.step, rank=world.rank,
@@ -190,8 +198,6 @@ class Trainer:
         if self.last_saved != self.step:
             self._checkpoint(best=False)
         self._event({"event": "end", "state": "succeeded", "reason": None, "step": self.step})
-        if self.board is not None:
-            self.board.close()
         return Outcome("succeeded", None, self.step)
 
     def _train_step(self, batch: dict[str, Any]) -> tuple[float, dict[str, float]]:
