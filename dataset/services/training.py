@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import select
+from sqlalchemy import and_, or_, select
 from sqlalchemy.orm import Session
 
 from dataset.atomic import atomic_write_bytes
@@ -229,6 +229,11 @@ def get_run(session: Session, run_id: int) -> TrainingRun:
     return run
 
 
+def run_of_job(session: Session, job_id: int) -> int | None:
+    """The run whose train job is ``job_id`` (retrying that job means resuming the run)."""
+    return session.scalar(select(TrainingRun.id).where(TrainingRun.job_id == job_id))
+
+
 def effective_state(run: TrainingRun) -> RunState:
     """The run's state, with a lost worker shown: the reaper marks the job, not the run."""
     if run.state in (RunState.queued, RunState.running) and run.job is not None \
@@ -297,13 +302,15 @@ def list_runs(session: Session, run_ids: Sequence[int] | None = None) -> list[Tr
     return list(session.scalars(query))
 
 
-def metrics_since(session: Session, run_id: int, after_step: int = -1) -> dict[str, list[dict[str, Any]]]:
-    """The run's curve points with step > ``after_step``: ``{"step": […], "val": […]}``, by step."""
+def metrics_since(session: Session, run_id: int, after_step: int = -1, after_val: int = -1) -> dict[str, list[dict[str, Any]]]:
+    """The run's curve points past what a chart has: ``{"step": [training points with step > after_step],
+    "val": [validations with step > after_val]}``, by step (a validation lands after its step's point)."""
     get_run(session, run_id)
     out: dict[str, list[dict[str, Any]]] = {"step": [], "val": []}
-    rows = session.scalars(select(TrainingMetric).where(TrainingMetric.run_id == run_id,
-                                                        TrainingMetric.step > after_step)
-                           .order_by(TrainingMetric.step, TrainingMetric.kind))
+    rows = session.scalars(select(TrainingMetric).where(
+        TrainingMetric.run_id == run_id,
+        or_(and_(TrainingMetric.kind == "step", TrainingMetric.step > after_step),
+            and_(TrainingMetric.kind == "val", TrainingMetric.step > after_val))).order_by(TrainingMetric.step))
     for row in rows:
         out.setdefault(row.kind, []).append({"step": row.step, **row.values})
     return out

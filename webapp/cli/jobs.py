@@ -11,8 +11,10 @@ from sqlalchemy import select
 from dataset.db import transaction
 from dataset.models import Job
 from dataset.services import jobs as job_service
+from dataset.services import training
 from webapp.cli.errors import service_errors
 from webapp.cli.state import CliState, pass_state
+from webapp.jobs import runs as run_control
 
 
 @click.command()
@@ -70,10 +72,15 @@ def list_jobs(state: CliState, state_filter: str | None, as_json: bool) -> None:
 @click.argument("job_id", type=int)
 @pass_state
 def retry(state: CliState, job_id: int) -> None:
-    """Queue a failed or interrupted job again."""
+    """Queue a failed or interrupted job again (a training job: resume its run)."""
     with service_errors():
-        state.runtime.queue.retry(job_id)
-    click.echo(f"job {job_id} queued again")
+        with state.runtime.sessions() as s:
+            run_id = training.run_of_job(s, job_id)
+        if run_id is not None:
+            run_control.resume(state.runtime, run_id, None)
+        else:
+            state.runtime.queue.retry(job_id)
+    click.echo(f"job {job_id} queued again" + (f" (run {run_id} resumes)" if run_id is not None else ""))
 
 
 @jobs.command("show")

@@ -13,32 +13,12 @@ import click
 from dataset.db import transaction
 from dataset.models import IllusionType
 from dataset.services import training
-from dataset.services.errors import InvalidInput
 from model import registry
 from webapp.cli.errors import service_errors
 from webapp.cli.state import CliState, pass_state
 from webapp.jobs import runs as run_control
 
 NO_WORKER_HINT_S = 15.0
-
-
-def parse_crop(text: str) -> tuple[int, int]:
-    """``320x736`` → (H, W) in pixels."""
-    try:
-        height, width = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise InvalidInput(f"crop {text!r}: expected HxW in pixels, e.g. 320x736") from None
-    if height <= 0 or width <= 0:
-        raise InvalidInput(f"crop {text!r}: height and width must be positive")
-    return height, width
-
-
-def overrides_from(*, steps: int | None, batch: int | None, lr: float | None, crop: str | None,
-                   iters: int | None) -> dict[str, Any]:
-    """The preset overrides the command line and the launch form share (dotted TrainConfig names)."""
-    values = {"train.steps": steps, "train.batch_size": batch, "train.lr": lr,
-              "train.crop": parse_crop(crop) if crop else None, "train.train_iters": iters}
-    return {key: value for key, value in values.items() if value is not None}
 
 
 @click.command()
@@ -87,7 +67,7 @@ def train(state: CliState, preset: str, steps: int | None, batch: int | None, lr
         launch = training.Launch(nproc=nproc, devices=devices, nnodes=nnodes, rdzv_endpoint=rdzv_endpoint,
                                  init_checkpoint=str(init_checkpoint.resolve()) if init_checkpoint else None,
                                  split=training.parse_split(split), seed=seed)
-        overrides = overrides_from(steps=steps, batch=batch, lr=lr, crop=crop, iters=iters)
+        overrides = run_control.overrides_from(steps=steps, batch=batch, lr=lr, crop=crop, iters=iters)
         with transaction(rt.sessions) as s:
             run = run_control.launch(rt, s, preset=preset, overrides=overrides, selection=selection,
                                      launch=launch, user=None)

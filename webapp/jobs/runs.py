@@ -26,6 +26,25 @@ _STEP = re.compile(r"step_(\d+)\.pt$")
 CHECKPOINT_CHOICES = ("best", "last")
 
 
+def parse_crop(text: str) -> tuple[int, int]:
+    """``320x736`` → (H, W) in pixels."""
+    try:
+        height, width = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise InvalidInput(f"crop {text!r}: expected HxW in pixels, e.g. 320x736") from None
+    if height <= 0 or width <= 0:
+        raise InvalidInput(f"crop {text!r}: height and width must be positive")
+    return height, width
+
+
+def overrides_from(*, steps: int | None, batch: int | None, lr: float | None, crop: str | None,
+                   iters: int | None) -> dict[str, Any]:
+    """The preset overrides the command line and the launch form share (dotted TrainConfig names)."""
+    values = {"train.steps": steps, "train.batch_size": batch, "train.lr": lr,
+              "train.crop": parse_crop(crop) if crop else None, "train.train_iters": iters}
+    return {key: value for key, value in values.items() if value is not None}
+
+
 def launch(rt: Runtime, session: Session, *, preset: str, overrides: dict[str, Any],
            selection: training.DataSelection, launch: training.Launch, user: User | None) -> TrainingRun:
     """Create the run (validated, its dataset version pinned, ``run.json`` written) and queue its job."""
