@@ -228,7 +228,10 @@ def _train_demo_model(rt: Runtime) -> None:
     if any(job_state != JobState.succeeded for _, job_state in results):
         click.echo(f"the demo run did not succeed; see `illusion-studio runs show {run_id}`", err=True)
         return
-    doc = run_control.promote(rt, run_id, "best", admin)
+    try:
+        doc = run_control.promote(rt, run_id, "best", admin)
+    except InvalidInput:  # no finite validation EPE, so no best checkpoint: the last one will do
+        doc = run_control.promote(rt, run_id, "last", admin)
     click.echo(f"demo run {run_id} trained in {time.monotonic() - started:.0f} s; current model: step {doc['step']}",
                err=True)
 
