@@ -43,8 +43,8 @@ def train_job(ctx: JobContext) -> dict[str, Any]:
         run = training.start_attempt(s, run_id, ctx.job_id)
         launch, offset = dict(run.launch), run.progress_offset
     command = torchrun_command(directory, launch, watch_pid=os.getpid())
-    ctx.log(f"run {run_id}: {' '.join(command)}")
     group = ProcessGroup(command, env_extra=device_env(launch.get("devices", "auto")))
+    ctx.log(f"run {run_id}: trainers in process group {group.pgid}: {' '.join(command)}")
     end, offset, cancelled = None, offset, False
     while True:
         code = group.poll()

@@ -31,6 +31,8 @@ def add_accepted_samples(session: Session, media: MediaStore, videos: int = 3, f
             illusion[16:48, 24:72] = True
             files = store_outputs(media, {"left": left, "right": right,
                                           "disparity": np.full((H, W), DISPARITY, np.float32),
+                                          # the lite preset's precomputed mono backend reads this
+                                          "disparity_mono": np.linspace(0.5, 1.5, H * W, dtype=np.float32).reshape(H, W),
                                           "masks": {"illusion_00": illusion}})
             frame = Frame(video_id=video.id, index=f, time_s=f / 2, width=W, height=H,
                           content_sha256=files["left"].rsplit("/", 1)[1][:64], media_key=files["left"],

@@ -12,7 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import re
-from collections import Counter, defaultdict
+from collections import defaultdict
 from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -26,7 +26,7 @@ from dataset.export.splits import parse_split_spec, split_of
 from dataset.media import MediaStore
 from dataset.models import IllusionType, JobState, RunState, TrainingMetric, TrainingRun, User, utcnow
 from dataset.readers import READER_FORMATS, open_reader
-from dataset.readers.version import pin_dataset_version, split_by_video, version_media_keys
+from dataset.readers.version import pin_dataset_version, split_by_video, version_counts, version_media_keys
 from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 
@@ -147,7 +147,8 @@ def _pin_folder(selection: DataSelection) -> dict[str, Any]:
     digest = hashlib.sha256(json.dumps([selection.format, names]).encode()).hexdigest()
     return {"id": digest, "created_at": utcnow().isoformat() + "Z",
             "filters": {"format": selection.format, "root": selection.root},
-            "items": [{"name": n, "video_id": _folder_group(n), "kind": "synthesized"} for n in names]}
+            "items": [{"name": n, "video_id": _folder_group(n), "kind": "synthesized", "illusion_types": []}
+                      for n in names]}
 
 
 def _is_folder(version: dict[str, Any]) -> bool:
@@ -243,7 +244,8 @@ def effective_state(run: TrainingRun) -> RunState:
 
 
 def kind_counts(version: dict[str, Any]) -> dict[str, int]:
-    counts = Counter(item.get("kind", "synthesized") for item in version.get("items", []))
+    """Samples of each kind (synthesized, capture) in a version."""
+    counts = version_counts(version) if version.get("items") else {}
     return {kind: counts.get(kind, 0) for kind in SAMPLE_KINDS}
 
 
