@@ -16,6 +16,7 @@ import hashlib
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -37,28 +38,8 @@ class DepthAnythingBackend:
 
     def __init__(self, model_path: Path, device: str = "cpu") -> None:
         self.model_path = Path(model_path)
-        config_file = self.model_path / "config.json"
-        try:
-            config = json.loads(config_file.read_text())
-        except (OSError, ValueError) as exc:
-            raise ValueError(f"{self.model_path} is not a Depth Anything checkpoint directory: {exc}") from exc
-        if config.get("model_type") != "depth_anything":
-            raise ValueError(f"{config_file} is a {config.get('model_type')!r} model, not depth_anything")
-        if config.get("depth_estimation_type", "relative") != "relative":
-            raise ValueError(f"{config_file} is a metric-depth checkpoint; a relative (disparity) one is needed")
-        try:
-            self.device = torch.device(device)
-        except RuntimeError as exc:
-            raise ValueError(f"bad torch device {device!r}: {exc}") from None
-        self.model_id = f"{self.name}:{self.model_path.name}:{_fingerprint(self.model_path)}"
-        try:
-            self.model = AutoModelForDepthEstimation.from_pretrained(self.model_path).to(self.device).eval()
-            if (self.model_path / _PROCESSOR_FILE).is_file():
-                self.processor = AutoImageProcessor.from_pretrained(self.model_path, backend="pil")
-            else:
-                self.processor = DPTImageProcessorPil(**_RELEASED_PROCESSOR)
-        except (OSError, ValueError) as exc:
-            raise ValueError(f"cannot load Depth Anything from {self.model_path}: {exc}") from exc
+        self.model, self.processor, self.model_id = load_depth_anything(self.model_path, device)
+        self.device = self.model.device
         # The backbone only sees whole patches: whatever the processor config says, keep sides multiples of it.
         self._multiple = math.lcm(int(self.processor.ensure_multiple_of or 1), int(self.model.config.patch_size))
 
@@ -75,6 +56,35 @@ class DepthAnythingBackend:
             outputs = self.model(pixel_values=inputs["pixel_values"].to(self.device))
             [result] = self.processor.post_process_depth_estimation(outputs, target_sizes=[(height, width)])
         return result["predicted_depth"].float().cpu().numpy().reshape(height, width)
+
+
+def load_depth_anything(model_path: Path, device: str = "cpu") -> tuple[Any, Any, str]:
+    """(model in eval mode on ``device``, its PIL image processor, model id) from a local relative-depth
+    Depth Anything checkpoint directory; ValueError (one line) naming the directory otherwise."""
+    model_path = Path(model_path)
+    config_file = model_path / "config.json"
+    try:
+        config = json.loads(config_file.read_text())
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{model_path} is not a Depth Anything checkpoint directory: {exc}") from exc
+    if config.get("model_type") != "depth_anything":
+        raise ValueError(f"{config_file} is a {config.get('model_type')!r} model, not depth_anything")
+    if config.get("depth_estimation_type", "relative") != "relative":
+        raise ValueError(f"{config_file} is a metric-depth checkpoint; a relative (disparity) one is needed")
+    try:
+        torch_device = torch.device(device)
+    except RuntimeError as exc:
+        raise ValueError(f"bad torch device {device!r}: {exc}") from None
+    model_id = f"{DepthAnythingBackend.name}:{model_path.name}:{_fingerprint(model_path)}"
+    try:
+        model = AutoModelForDepthEstimation.from_pretrained(model_path).to(torch_device).eval()
+        if (model_path / _PROCESSOR_FILE).is_file():
+            processor = AutoImageProcessor.from_pretrained(model_path, backend="pil")
+        else:
+            processor = DPTImageProcessorPil(**_RELEASED_PROCESSOR)
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"cannot load Depth Anything from {model_path}: {exc}") from exc
+    return model, processor, model_id
 
 
 def _fingerprint(model_path: Path) -> str:

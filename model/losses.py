@@ -1,0 +1,84 @@
+"""The training loss (paper appendix "Loss"): L = L_d + w·L_c.
+
+L_d = Σ_t γ^(T+2−t)·|D_s^t − D_G|₁ + γ·|D̃_m − D_G|₁ + |D_f − D_G|₁, with γ adjusted as the
+authors' code does, γ^(15/(T−1)) for T > 1 (γ itself for T = 1). L_c is the focal loss on I_c,
+α_c·(1 − e^(−L_b))^γ_c·L_b with L_b the binary cross entropy against
+1[bilinear-downsampled |D_G − D_s^T| < 1.25] at the confidence map's resolution.
+
+Only valid pixels with ground truth below ``max_disparity`` count. Every term is a SUM over
+this rank's pixels divided by ``valid_total``, the valid-pixel count summed over all ranks (the
+focal term's by that count times the area ratio of the confidence map to the image), so the
+loss is a global mean whatever the split across ranks. DDP averages gradients over ranks, so a
+trainer with world size N multiplies this loss by N (or sums gradients) to get the gradient of
+the global mean: 2 ranks × B/2 then give the gradient of 1 rank × B.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+from model.network import FusionOutput
+from model.presets import TrainConfig
+
+CONFIDENT_ERROR_PX = 1.25  # full-resolution pixels: the confidence target's threshold
+
+
+def sequence_gamma(gamma: float, iterations: int) -> float:
+    """The authors' adjusted γ: γ^(15/(T−1)) for T > 1, γ for T = 1."""
+    return gamma ** (15 / (iterations - 1)) if iterations > 1 else gamma
+
+
+def confidence_target(error: Tensor, valid: Tensor, size: tuple[int, int]) -> tuple[Tensor, Tensor]:
+    """(target, valid) at ``size``: the full-resolution |D_G − D_s^T| (B×1×H×W pixels, invalid
+    pixels ignored) downsampled bilinearly, < 1.25 → 1; a low-resolution pixel is valid where
+    most of what it samples is."""
+    valid_f = valid.float()
+    weight = F.interpolate(valid_f, size, mode="bilinear", align_corners=False)
+    summed = F.interpolate(error * valid_f, size, mode="bilinear", align_corners=False)
+    low_error = summed / weight.clamp_min(1e-6)
+    return (low_error < CONFIDENT_ERROR_PX).float(), weight > 0.5
+
+
+def focal_terms(logits: Tensor, target: Tensor, alpha: float, gamma: float) -> Tensor:
+    """Per pixel α·(1 − e^(−L_b))^γ·L_b, L_b the binary cross entropy of σ(logits) against target."""
+    bce = F.binary_cross_entropy_with_logits(logits, target, reduction="none")
+    return alpha * (1 - torch.exp(-bce)) ** gamma * bce
+
+
+def fusion_loss(out: FusionOutput, gt: Tensor, valid: Tensor, cfg: TrainConfig, *,
+                valid_total: Tensor | None = None) -> tuple[Tensor, dict[str, float]]:
+    """(scalar loss, parts) for ``gt`` B×1×H×W pixels and ``valid`` bool B×1×H×W. Parts:
+    "stereo", "mono_aligned", "final", "confidence" (each already weighted), "total", "epe"
+    (of the final disparity, over this batch's valid pixels), "valid" (this batch's count)."""
+    if gt.shape != out.disparity.shape or valid.shape != gt.shape:
+        raise ValueError(f"gt and valid must be {tuple(out.disparity.shape)}, got {tuple(gt.shape)}, {tuple(valid.shape)}")
+    mask = valid.bool() & torch.isfinite(gt) & (gt < cfg.max_disparity)
+    gt = torch.where(mask, gt, torch.zeros_like(gt))
+    count = mask.sum()
+    total = (count if valid_total is None else valid_total).to(gt.dtype).clamp_min(1)
+    maskf = mask.to(gt.dtype)
+
+    def l1(pred: Tensor) -> Tensor:
+        return ((pred - gt).abs() * maskf).sum() / total
+
+    iterates = out.stereo_iterates
+    steps = len(iterates)
+    gamma = sequence_gamma(cfg.loss_gamma, steps)
+    stereo = sum(gamma ** (steps + 2 - t) * l1(pred) for t, pred in enumerate(iterates, start=1))
+    mono = gamma * l1(out.mono_aligned)
+    final = l1(out.disparity)
+    size = out.confidence_logits.shape[2:]
+    error = (gt - out.stereo.detach()).abs()
+    target, valid_low = confidence_target(error, mask, size)
+    area = (size[0] * size[1]) / (gt.shape[2] * gt.shape[3])
+    terms = focal_terms(out.confidence_logits, target, cfg.focal_alpha, cfg.focal_gamma)
+    confidence = cfg.focal_weight * (terms * valid_low).sum() / (total * area)
+    loss = stereo + mono + final + confidence
+    with torch.no_grad():
+        epe = ((out.disparity - gt).abs() * maskf).sum() / count.clamp_min(1)
+    named = {"stereo": stereo, "mono_aligned": mono, "final": final, "confidence": confidence, "total": loss,
+             "epe": epe, "valid": count}
+    parts = {name: float(value.detach()) for name, value in named.items()}
+    return loss, parts

@@ -1,0 +1,138 @@
+"""The VLM-driven monocular–stereo fusion network (paper section 4), wiring the branches as
+RAFT-Stereo's ``raft_stereo.py`` does: mono branch → context → stereo GRU iterations → VLM
+embeddings → flow confidence → global fusion."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+from model.confidence import ConfidenceHead
+from model.fusion import GlobalFusion
+from model.mono import make_mono, normalize_mono
+from model.presets import ModelConfig
+from model.stereo.raft import StereoBranch
+from model.vlm import make_vlm
+
+# Parameters under these prefixes are frozen backbones: never trained, never stored in checkpoints
+# (their LoRA adapters, named "lora_", are).
+FROZEN_PREFIXES = ("mono.backbone.", "vlm.backbone.")
+
+
+@dataclass
+class FusionOutput:
+    disparity: Tensor  # B×1×H×W, pixels, final fused disparity, full resolution
+    stereo_iterates: list[Tensor]  # T tensors B×1×H×W, pixels (in eval mode by default only the last)
+    stereo: Tensor  # B×1×H×W, the last iterate
+    mono_aligned: Tensor  # B×1×H×W, pixels: s_m·D_m + t_m, upsampled to full resolution
+    confidence: Tensor  # B×1×h×w in (0, 1) at the stereo working resolution
+    confidence_logits: Tensor  # same shape, pre-sigmoid
+    mono: Tensor  # B×1×H×W, the relative mono disparity used (given or estimated)
+
+
+class FusionNetwork(nn.Module):
+    """Left/right RGB (float32 B×3×H×W in [0, 255], H and W multiples of ``size_multiple``) and an
+    optional relative mono disparity → :class:`FusionOutput`."""
+
+    def __init__(self, config: ModelConfig) -> None:
+        super().__init__()
+        self.config = config
+        self.factor = 2**config.n_downsample
+        self.mono = make_mono(config)
+        self.stereo_branch = StereoBranch(config, self.mono.feature_channels)
+        self.vlm = make_vlm(config) if config.use_vlm else None
+        condition_dim = self.vlm.dim if self.vlm is not None else 0
+        self.confidence = ConfidenceHead(config, condition_dim)
+        self.fusion = GlobalFusion(config, config.hidden_dims[0])
+        multiples = [2 ** (config.n_downsample + 2), 2**config.token_downsample]
+        if config.use_vlm and config.vlm_backend == "lite":
+            multiples.append(config.vlm_patch)
+        self.size_multiple = math.lcm(*multiples)
+        self._hashes: dict[str, str] | None = None
+
+    def forward(self, left: Tensor, right: Tensor, mono: Tensor | None = None, *, iters: int,
+                noise: torch.Generator | Sequence[torch.Generator] | None = None,
+                all_iterates: bool | None = None) -> FusionOutput:
+        """``iters`` GRU iterations; ``noise``: generator(s) for the flow's Gaussian noise (one for
+        the batch or one per sample); ``all_iterates``: upsample every iterate (default: in
+        training mode only; in eval mode ``stereo_iterates`` holds the last one)."""
+        self._check(left, right, mono)
+        all_iterates = self.training if all_iterates is None else all_iterates
+        left_n, right_n = 2 * (left / 255.0) - 1, 2 * (right / 255.0) - 1
+        mono_result = self.mono(left_n, mono)
+        mono_full = normalize_mono(mono_result.disparity)
+        mono_low = F.avg_pool2d(mono_full, self.factor)
+        stereo = self.stereo_branch(left_n, right_n, mono_result.features, iters=iters, all_iterates=all_iterates)
+        disparity_low = stereo.iterates_low[-1]
+        cost = stereo.corr.lookup(disparity_low.detach())
+        if self.vlm is not None:
+            vlm = self.vlm(left_n, stereo.iterates[-1], mono_result.disparity)
+            logits = self.confidence(cost, vlm=vlm, noise=noise)
+        else:
+            logits = self.confidence(cost, features=stereo.left_features)
+        confidence = torch.sigmoid(logits)
+        fused = self.fusion(mono_low, disparity_low, confidence, stereo.hidden, stereo.mask)
+        size = left.shape[2:]
+        scale = F.interpolate(fused.scale, size, mode="bilinear", align_corners=False)
+        shift = F.interpolate(fused.shift, size, mode="bilinear", align_corners=False)
+        aligned = self.factor * (scale * mono_full + shift)
+        return FusionOutput(fused.disparity, stereo.iterates, stereo.iterates[-1], aligned, confidence, logits,
+                            mono_result.disparity)
+
+    def _check(self, left: Tensor, right: Tensor, mono: Tensor | None) -> None:
+        if left.ndim != 4 or left.shape[1] != 3 or left.shape != right.shape:
+            raise ValueError(f"left and right must both be B×3×H×W, got {tuple(left.shape)} and {tuple(right.shape)}")
+        height, width = left.shape[2:]
+        if height % self.size_multiple or width % self.size_multiple:
+            raise ValueError(f"image sides must be multiples of {self.size_multiple}, got {height}×{width}")
+        if mono is not None and tuple(mono.shape) != (left.shape[0], 1, height, width):
+            raise ValueError(f"mono must be B×1×H×W = {(left.shape[0], 1, height, width)}, got {tuple(mono.shape)}")
+
+    def train(self, mode: bool = True) -> FusionNetwork:
+        super().train(mode)
+        return self  # frozen backbones keep themselves in eval mode (their modules' train())
+
+    def frozen_modules(self) -> dict[str, nn.Module]:
+        """The frozen backbones by name ("mono", "vlm"); empty for weight-free backends."""
+        modules: dict[str, nn.Module] = {}
+        if getattr(self.mono, "frozen", False):
+            modules["mono"] = self.mono
+        if self.vlm is not None and getattr(self.vlm, "frozen", False):
+            modules["vlm"] = self.vlm
+        return modules
+
+    def frozen_state_hashes(self) -> dict[str, str]:
+        """sha256 content hashes of the frozen backbones' released weights, by name (may be {})."""
+        if self._hashes is None:
+            self._hashes = {name: module.state_hash() for name, module in self.frozen_modules().items()}  # type: ignore[operator]
+        return dict(self._hashes)
+
+    def frozen_paths(self) -> dict[str, str]:
+        """The local directories the frozen backbones were loaded from, by name."""
+        return {name: str(module.model_path) for name, module in self.frozen_modules().items()}
+
+    def trainable_state_dict(self) -> dict[str, Tensor]:
+        """Everything but the frozen backbones (LoRA adapters included), detached."""
+        return {name: tensor.detach() for name, tensor in self.state_dict().items() if not _is_frozen(name)}
+
+    def load_trainable_state_dict(self, state: dict[str, Tensor]) -> None:
+        """Loads what :meth:`trainable_state_dict` gave; ValueError naming missing or unknown keys."""
+        expected = set(self.trainable_state_dict())
+        missing, unknown = expected - set(state), set(state) - expected
+        if missing or unknown:
+            raise ValueError("checkpoint weights do not fit this network: "
+                             f"missing {sorted(missing)[:5]}, unknown {sorted(unknown)[:5]}")
+        self.load_state_dict(state, strict=False)
+
+    def trainable_parameters(self) -> list[nn.Parameter]:
+        """Parameters the optimiser updates (frozen backbones excluded, their LoRA adapters included)."""
+        return [p for p in self.parameters() if p.requires_grad]
+
+
+def _is_frozen(name: str) -> bool:
+    return name.startswith(FROZEN_PREFIXES) and "lora_" not in name

@@ -1,0 +1,218 @@
+"""Model and training configuration: typed, frozen dataclasses filled from the preset files
+``model/presets/<name>.toml`` plus overrides (``{"train.steps": 100}`` or a unique leaf name).
+
+Units: ``crop`` is (H, W) pixels; disparities are pixels; ``scale`` is a log2 spatial scale range.
+An empty path in a preset file means "none".
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+import types
+import typing
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+PRESETS: tuple[str, ...] = ("lite", "paper")
+PRESET_DIR = Path(__file__).parent / "presets"
+
+MonoBackend = Literal["precomputed", "depth-anything-v2"]
+VlmBackend = Literal["lite", "qwen2-vl"]
+FusionRule = Literal["paper", "released"]
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Architecture and backends. Resolutions are fractions of the input: the stereo branch works
+    at 1/2**n_downsample, its GRU levels at 1/2**n_downsample … 1/2**(n_downsample+2), the flow's
+    tokens at 1/2**token_downsample."""
+
+    n_downsample: int = 3
+    encoder_dims: tuple[int, int, int] = (16, 32, 48)  # stem, then the two strided stages
+    encoder_blocks: tuple[int, int, int] = (0, 1, 1)  # residual blocks per stage (≥ 1 for strided stages)
+    stem_kernel: int = 3
+    feature_dim: int = 48  # matching features for the correlation
+    hidden_dims: tuple[int, int, int] = (32, 32, 32)  # GRU hidden channels, finest level first
+    motion_dim: int = 32
+    corr_levels: int = 4
+    corr_radius: int = 4
+    mono_backend: MonoBackend = "precomputed"
+    mono_model_path: str | None = None
+    mono_input_size: int = 518  # long side given to Depth Anything (a multiple of its patch)
+    mono_feature_dim: int = 32
+    vlm_backend: VlmBackend = "lite"
+    vlm_model_path: str | None = None
+    vlm_max_pixels: int = 200704  # per image given to Qwen2-VL
+    vlm_lora: bool = False
+    lora_r: int = 8
+    lora_alpha: int = 32
+    lora_dropout: float = 0.05
+    vlm_dim: int = 64  # lite encoder width
+    vlm_depth: int = 2
+    vlm_patch: int = 32  # lite encoder patch side, pixels
+    use_vlm: bool = True  # False: confidence from image features alone (the paper's PF ablation)
+    flow_steps: int = 2  # K Euler steps
+    flow_dim: int = 64
+    flow_latent: int = 8  # channels of the flow's state y per token
+    flow_depth: int = 2
+    flow_heads: int = 4
+    token_downsample: int = 5
+    confidence_dim: int = 32
+    fusion_rule: FusionRule = "paper"  # "released": D = c·D_s + (1−c)·(a·D_m + b), global confident mean
+    fusion_dim: int = 32
+    fusion_pool_kernel: int = 7  # neighbourhood (working-resolution pixels) pooled for unconfident s_m, t_m
+
+    def __post_init__(self) -> None:
+        if self.n_downsample not in (2, 3):
+            raise ValueError(f"model.n_downsample must be 2 or 3, got {self.n_downsample}")
+        if min(self.encoder_blocks[1:]) < 1:
+            raise ValueError("model.encoder_blocks: the two strided stages need at least one block each")
+        if self.token_downsample < self.n_downsample:
+            raise ValueError("model.token_downsample must be at least model.n_downsample")
+        if self.fusion_pool_kernel % 2 == 0:
+            raise ValueError("model.fusion_pool_kernel must be odd")
+        if self.flow_dim % self.flow_heads:
+            raise ValueError("model.flow_dim must be a multiple of model.flow_heads")
+        positive = ("feature_dim", "motion_dim", "corr_levels", "corr_radius", "mono_feature_dim", "vlm_dim",
+                    "vlm_patch", "flow_steps", "flow_latent", "flow_depth", "confidence_dim", "fusion_dim")
+        for name in positive:
+            if getattr(self, name) < 1:
+                raise ValueError(f"model.{name} must be at least 1, got {getattr(self, name)}")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Optimisation, loss and augmentation settings (see MODEL_API.md)."""
+
+    steps: int = 2000
+    batch_size: int = 2
+    lr: float = 4e-4
+    weight_decay: float = 1e-5
+    pct_start: float = 0.01
+    grad_clip: float = 1.0
+    crop: tuple[int, int] = (192, 320)
+    train_iters: int = 7
+    test_iters: int = 8
+    amp: bool = False
+    max_disparity: float = 700.0
+    loss_gamma: float = 0.9
+    focal_alpha: float = 0.25
+    focal_gamma: float = 2.0
+    focal_weight: float = 1.0
+    val_every: int = 250
+    checkpoint_every: int = 250
+    keep_last: int = 3
+    seed: int = 0
+    saturation: tuple[float, float] = (0.0, 1.4)
+    scale: tuple[float, float] = (-0.2, 0.4)
+    color_jitter: bool = True
+
+    def __post_init__(self) -> None:
+        for name in ("steps", "batch_size", "train_iters", "test_iters", "keep_last"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"train.{name} must be at least 1, got {getattr(self, name)}")
+        if min(self.crop) < 1:
+            raise ValueError(f"train.crop must be positive (H, W) pixels, got {self.crop}")
+
+
+@dataclass(frozen=True)
+class Config:
+    preset: str
+    model: ModelConfig
+    train: TrainConfig
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able: tuples become lists."""
+        return {"preset": self.preset, "model": _plain(self.model), "train": _plain(self.train)}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Config:
+        """The inverse of :meth:`to_dict`; ValueError naming an unknown or badly typed field."""
+        if not isinstance(data, Mapping) or not {"model", "train"} <= set(data):
+            raise ValueError("a model config needs 'model' and 'train' sections")
+        unknown = set(data) - {"preset", "model", "train"}
+        if unknown:
+            raise ValueError(f"unknown config section(s): {', '.join(sorted(unknown))}")
+        return cls(preset=str(data.get("preset", "custom")),
+                   model=_build(ModelConfig, data["model"], "model"),
+                   train=_build(TrainConfig, data["train"], "train"))
+
+
+def load_preset(name: str, overrides: Mapping[str, Any] | None = None) -> Config:
+    """The preset ``name`` (one of PRESETS) with ``overrides`` applied: keys "section.field" or a
+    field name found in one section only. ValueError naming an unknown preset, key or bad value."""
+    if name not in PRESETS:
+        raise ValueError(f"unknown model preset {name!r}; choose one of {', '.join(PRESETS)}")
+    with open(PRESET_DIR / f"{name}.toml", "rb") as handle:
+        data = tomllib.load(handle)
+    for key, value in (overrides or {}).items():
+        section, field = _locate(key)
+        data.setdefault(section, {})[field] = value
+    return Config.from_dict({"preset": name, **data})
+
+
+def _locate(key: str) -> tuple[str, str]:
+    sections = {"model": ModelConfig, "train": TrainConfig}
+    if "." in key:
+        section, field = key.split(".", 1)
+        if section not in sections or field not in _field_types(sections[section]):
+            raise ValueError(f"unknown config key {key!r}")
+        return section, field
+    matches = [s for s, cls in sections.items() if key in _field_types(cls)]
+    if len(matches) != 1:
+        raise ValueError(f"unknown config key {key!r}" if not matches else f"ambiguous config key {key!r}")
+    return matches[0], key
+
+
+def _field_types(cls: type) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
+
+
+def _plain(obj: object) -> dict[str, Any]:
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(obj).items()}  # type: ignore[call-overload]
+
+
+def _build(cls: type, values: Mapping[str, Any], section: str) -> Any:
+    if not isinstance(values, Mapping):
+        raise ValueError(f"config section {section!r} must be a table")
+    types = _field_types(cls)
+    unknown = set(values) - set(types)
+    if unknown:
+        raise ValueError(f"unknown config key(s) {', '.join(f'{section}.{k}' for k in sorted(unknown))}")
+    converted = {name: _convert(values[name], types[name], f"{section}.{name}") for name in values}
+    return cls(**converted)
+
+
+def _convert(value: Any, kind: Any, name: str) -> Any:
+    """``value`` checked against the field type ``kind``; ValueError naming the field."""
+    origin, args = typing.get_origin(kind), typing.get_args(kind)
+    if origin is Literal:
+        if value not in args:
+            raise ValueError(f"{name} must be one of {', '.join(map(repr, args))}, got {value!r}")
+        return value
+    if origin in (typing.Union, types.UnionType) and type(None) in args:
+        return None if value in (None, "") else _convert(value, next(a for a in args if a is not type(None)), name)
+    if origin is tuple:
+        if not isinstance(value, list | tuple) or len(value) != len(args):
+            raise ValueError(f"{name} must be a list of {len(args)} values, got {value!r}")
+        return tuple(_convert(v, a, f"{name}[{i}]") for i, (v, a) in enumerate(zip(value, args, strict=True)))
+    if kind is bool:
+        if not isinstance(value, bool):
+            raise ValueError(f"{name} must be true or false, got {value!r}")
+        return value
+    if kind is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ValueError(f"{name} must be an integer, got {value!r}")
+        return value
+    if kind is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ValueError(f"{name} must be a number, got {value!r}")
+        return float(value)
+    if kind is str:
+        if not isinstance(value, str):
+            raise ValueError(f"{name} must be a string, got {value!r}")
+        return value
+    raise ValueError(f"{name}: unsupported field type {kind!r}")

@@ -1,0 +1,82 @@
+"""The multi-level ConvGRU update (RAFT-Stereo): GRUs at 1/2**n, 1/2**(n+1), 1/2**(n+2) pass
+hidden states up and down; the finest one reads correlation and disparity ("motion") features
+and predicts a disparity update and the convex-upsampling mask."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+from model.stereo.upsample import MaskHead
+
+
+class ConvGRU(nn.Module):
+    """A convolutional GRU cell whose gates also get per-pixel context terms (cz, cr, cq),
+    computed once per forward from the context features."""
+
+    def __init__(self, hidden: int, inputs: int, kernel: int = 3) -> None:
+        super().__init__()
+        self.convz = nn.Conv2d(hidden + inputs, hidden, kernel, padding=kernel // 2)
+        self.convr = nn.Conv2d(hidden + inputs, hidden, kernel, padding=kernel // 2)
+        self.convq = nn.Conv2d(hidden + inputs, hidden, kernel, padding=kernel // 2)
+
+    def forward(self, h: Tensor, context: Sequence[Tensor], *x: Tensor) -> Tensor:
+        cz, cr, cq = context
+        inputs = torch.cat(x, dim=1)
+        hx = torch.cat([h, inputs], dim=1)
+        z = torch.sigmoid(self.convz(hx) + cz)
+        r = torch.sigmoid(self.convr(hx) + cr)
+        q = torch.tanh(self.convq(torch.cat([r * h, inputs], dim=1)) + cq)
+        return (1 - z) * h + z * q
+
+
+class MotionEncoder(nn.Module):
+    """Correlation samples and the current disparity → ``dim`` channels (the last one is the
+    disparity itself, as RAFT keeps the flow)."""
+
+    def __init__(self, corr_channels: int, dim: int) -> None:
+        super().__init__()
+        self.corr = nn.Sequential(nn.Conv2d(corr_channels, dim, 1), nn.ReLU(inplace=True),
+                                  nn.Conv2d(dim, dim, 3, padding=1), nn.ReLU(inplace=True))
+        self.disp = nn.Sequential(nn.Conv2d(1, dim, 7, padding=3), nn.ReLU(inplace=True),
+                                  nn.Conv2d(dim, dim, 3, padding=1), nn.ReLU(inplace=True))
+        self.out = nn.Conv2d(2 * dim, dim - 1, 3, padding=1)
+
+    def forward(self, corr: Tensor, disparity: Tensor) -> Tensor:
+        features = torch.cat([self.corr(corr), self.disp(disparity)], dim=1)
+        return torch.cat([torch.relu(self.out(features)), disparity], dim=1)
+
+
+def _pool2x(x: Tensor) -> Tensor:
+    return F.avg_pool2d(x, 3, stride=2, padding=1)
+
+
+def _resize_like(x: Tensor, like: Tensor) -> Tensor:
+    return F.interpolate(x, like.shape[2:], mode="bilinear", align_corners=True)
+
+
+class MultiLevelUpdate(nn.Module):
+    """Three GRU levels (hidden sizes finest first). ``forward`` updates all levels coarse to
+    fine and returns (hidden states, disparity update B×1×h×w in pixels, mask logits)."""
+
+    def __init__(self, hidden: Sequence[int], corr_channels: int, motion_dim: int, factor: int) -> None:
+        super().__init__()
+        h0, h1, h2 = hidden
+        self.motion = MotionEncoder(corr_channels, motion_dim)
+        self.gru0 = ConvGRU(h0, motion_dim + h1)
+        self.gru1 = ConvGRU(h1, h0 + h2)
+        self.gru2 = ConvGRU(h2, h1)
+        self.disp_head = nn.Sequential(nn.Conv2d(h0, 2 * h0, 3, padding=1), nn.ReLU(inplace=True),
+                                       nn.Conv2d(2 * h0, 1, 3, padding=1))
+        self.mask = MaskHead(h0, factor)
+
+    def forward(self, net: list[Tensor], context: list[Sequence[Tensor]], corr: Tensor,
+                disparity: Tensor, *, with_mask: bool = True) -> tuple[list[Tensor], Tensor, Tensor | None]:
+        net2 = self.gru2(net[2], context[2], _pool2x(net[1]))
+        net1 = self.gru1(net[1], context[1], _pool2x(net[0]), _resize_like(net2, net[1]))
+        net0 = self.gru0(net[0], context[0], self.motion(corr, disparity), _resize_like(net1, net[0]))
+        mask = self.mask(net0) if with_mask else None
+        return [net0, net1, net2], self.disp_head(net0), mask
