@@ -93,6 +93,9 @@ def test_demo_without_serving_builds_a_complete_workspace(tmp_path: Path) -> Non
     frames = json.loads(cli("--data-dir", str(home), "frames", "list", "--json").stdout)
     states = [f["state"] for f in frames]
     assert len(frames) == 24
-    assert states.count("generated") == 6 and states.count("approved") == 6 and states.count("prefiltered") == 12
+    # the demo accepts its generated samples, to train on them
+    assert states.count("accepted") == 6 and states.count("approved") == 6 and states.count("prefiltered") == 12
+    # two videos cannot fill train, val and test (no video in two splits): no run, and the reason
+    assert "no demo training run" in result.stderr and "2 video(s)" in result.stderr
     again = cli("--data-dir", str(home), "demo", "--no-serve", "--videos", "2")
     assert again.returncode == 0 and "jobs succeeded" not in again.stdout  # nothing to do twice

@@ -22,6 +22,9 @@ if TYPE_CHECKING:
     from webapp.runtime import Runtime
 
 log = logging.getLogger(__name__)
+QUEUES = ("default", "train")
+# Kinds that take hours go to a queue of their own, so other jobs never wait behind them.
+TRAIN_KINDS = frozenset({"train"})
 
 
 def make_huey(queue_url: str, sqlite_path: str, name: str) -> Huey:
@@ -31,6 +34,10 @@ def make_huey(queue_url: str, sqlite_path: str, name: str) -> Huey:
     if queue_url:
         raise ValueError(f"unsupported queue_url {queue_url!r}: use redis://… or leave empty for SQLite")
     return SqliteHuey(name, filename=sqlite_path, results=False)
+
+
+def queue_for(kind: str) -> str:
+    return "train" if kind in TRAIN_KINDS else "default"
 
 
 def check_reachable(huey: Huey) -> None:
@@ -75,14 +82,26 @@ class UnsentSweep:
 
 
 class JobQueue:
-    """Creates job rows and hands their ids to Huey; runs them in workers."""
+    """Creates job rows and hands their ids to Huey; runs them in workers.
+
+    Two Huey queues: ``default`` (named ``queue_name``) and ``train`` (``<queue_name>-train``),
+    each with its own workers (``illusion-studio worker --queue train``) and its own sweep.
+    """
 
     def __init__(self, runtime: Runtime) -> None:
         self.runtime = runtime
         s = runtime.settings
-        self.huey = make_huey(s.queue_url, str(s.queue_path), s.queue_name)
-        self._run = self.huey.task(name="run_job")(self._execute)
-        self.sweep = UnsentSweep(self.huey, self._run, HANDLERS, s.queue_resend_after_s)
+        self.hueys = {"default": make_huey(s.queue_url, str(s.queue_path), s.queue_name),
+                      "train": make_huey(s.queue_url, str(s.queue_path), f"{s.queue_name}-train")}
+        self.huey = self.hueys["default"]
+        self._tasks = {name: huey.task(name="run_job")(self._execute) for name, huey in self.hueys.items()}
+        self.sweeps = {name: UnsentSweep(huey, self._tasks[name], [k for k in HANDLERS if queue_for(k) == name],
+                                         s.queue_resend_after_s)
+                       for name, huey in self.hueys.items()}
+
+    def enqueue(self, job_id: int, kind: str) -> None:
+        """Hand a job's id to its queue (the row must be committed and queued)."""
+        self._tasks[queue_for(kind)](job_id)
 
     def submit(self, session: Session, kind: str, params: dict[str, Any], user: User | None) -> Job:
         """Create the row in the caller's transaction; enqueue once it commits.
@@ -93,22 +112,22 @@ class JobQueue:
         """
         if kind not in HANDLERS:
             raise ValueError(f"unknown job kind {kind!r}")
-        check_reachable(self.huey)
+        check_reachable(self.hueys[queue_for(kind)])
         job = job_rows.create_job(session, kind, params, user)
-        self._send_after_commit(session, job.id)
+        self._send_after_commit(session, job.id, kind)
         return job
 
     def retry(self, session: Session, job_id: int) -> Job:
         """Put a failed or interrupted job back in the queue, in the caller's transaction."""
-        check_reachable(self.huey)
         job = job_rows.mark_for_retry(session, job_id)
-        self._send_after_commit(session, job_id)
+        check_reachable(self.hueys[queue_for(job.kind)])
+        self._send_after_commit(session, job_id, job.kind)
         return job
 
-    def _send_after_commit(self, session: Session, job_id: int) -> None:
+    def _send_after_commit(self, session: Session, job_id: int, kind: str) -> None:
         def send(_session: Session) -> None:
             try:
-                self._run(job_id)
+                self.enqueue(job_id, kind)
             except Exception:  # the row is committed; the sweep re-sends it once the queue is back
                 log.warning("job %s is saved but could not be queued; a worker will re-send it", job_id,
                             exc_info=True)
@@ -118,13 +137,14 @@ class JobQueue:
     def _execute(self, job_id: int) -> str:
         return job_rows.execute_job(job_id, HANDLERS, self.runtime).value
 
-    def run_worker(self, concurrency: int = 1) -> None:
-        """Run a consumer until SIGINT/SIGTERM, with a heartbeat thread that also reaps lost jobs
-        and re-sends queued jobs whose message was lost."""
+    def run_worker(self, concurrency: int = 1, queue: str = "default") -> None:
+        """Run a consumer of ``queue`` until SIGINT/SIGTERM, with a heartbeat thread that also reaps
+        lost jobs and re-sends the queue's queued jobs whose message was lost."""
+        huey, sweep = self.hueys[queue], self.sweeps[queue]
         me = job_rows.worker_id()
         self._reap()
         stop = threading.Event()
-        interval = min(job_rows.HEARTBEAT_S, max(self.sweep.grace_s / 2, 0.5))
+        interval = min(job_rows.HEARTBEAT_S, max(sweep.grace_s / 2, 0.5))
 
         def beat() -> None:
             while not stop.wait(interval):
@@ -132,15 +152,15 @@ class JobQueue:
                     with transaction(self.runtime.sessions) as s:
                         job_rows.heartbeat(s, me)
                     self._reap()
-                    for job_id in self.sweep(self.runtime.sessions):
+                    for job_id in sweep(self.runtime.sessions):
                         log.warning("job %s was queued without a message; sent it again", job_id)
                 except Exception:  # a DB or queue hiccup must not kill the heartbeat
                     log.exception("heartbeat failed")
 
         threading.Thread(target=beat, name="heartbeat", daemon=True).start()
         # Said once a consumer thread is listening, so scripts (and tests) know when jobs will be taken.
-        self.huey.on_startup()(lambda: log.info("worker %s ready", me))
-        consumer = self.huey.create_consumer(workers=concurrency, worker_type="thread", periodic=False,
+        huey.on_startup()(lambda: log.info("worker %s ready", me))
+        consumer = huey.create_consumer(workers=concurrency, worker_type="thread", periodic=False,
                                              max_delay=1.0)
         try:
             consumer.run()
