@@ -42,6 +42,7 @@ def test_presets_load_override_and_round_trip() -> None:
     assert lite.train.steps == 7 and not lite.model.use_vlm and lite.train.crop == (64, 96)
     assert max(lite.model.hidden_dims) <= 64 and lite.model.n_downsample == 3
     assert Config.from_dict(lite.to_dict()) == lite
+    assert load_preset("lite", {"steps": "9", "use_vlm": "false", "lr": "1e-3"}).train.lr == 1e-3
     for overrides, message in (({"nope": 1}, "unknown config key 'nope'"), ({"train.steps": "x"}, "train.steps"),
                                ({"fusion_rule": "avg"}, "model.fusion_rule"), ({"crop": [1]}, "train.crop")):
         with pytest.raises(ValueError, match=message):
