@@ -199,6 +199,8 @@ def _convert(value: Any, kind: Any, name: str) -> Any:
         if not isinstance(value, list | tuple) or len(value) != len(args):
             raise ValueError(f"{name} must be a list of {len(args)} values, got {value!r}")
         return tuple(_convert(v, a, f"{name}[{i}]") for i, (v, a) in enumerate(zip(value, args, strict=True)))
+    if isinstance(value, str) and kind in (bool, int, float):
+        value = _parse_text(value, kind, name)  # from a CLI flag or a web form
     if kind is bool:
         if not isinstance(value, bool):
             raise ValueError(f"{name} must be true or false, got {value!r}")
@@ -216,3 +218,14 @@ def _convert(value: Any, kind: Any, name: str) -> Any:
             raise ValueError(f"{name} must be a string, got {value!r}")
         return value
     raise ValueError(f"{name}: unsupported field type {kind!r}")
+
+
+def _parse_text(text: str, kind: type, name: str) -> Any:
+    if kind is bool:
+        if text.strip().lower() in ("true", "1", "yes", "on", "false", "0", "no", "off"):
+            return text.strip().lower() in ("true", "1", "yes", "on")
+        raise ValueError(f"{name} must be true or false, got {text!r}")
+    try:
+        return kind(text.strip())
+    except ValueError:
+        raise ValueError(f"{name} must be {'an integer' if kind is int else 'a number'}, got {text!r}") from None

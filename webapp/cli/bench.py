@@ -92,6 +92,17 @@ def train_benchmark(as_json: bool, steps: int) -> None:
     _report(run_train_bench(steps=steps), as_json)
 
 
+@bench.command("model")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@click.option("--repeats", type=click.IntRange(min=1), default=2, show_default=True)
+@click.option("--train-steps", type=click.IntRange(min=1), default=3, show_default=True)
+def model_benchmark(as_json: bool, repeats: int, train_steps: int) -> None:
+    """The lite fusion model on a 1080p pair (own process: seconds, peak MB) beside OpenCV SGBM; parameters; train steps/s."""
+    from webapp.benchmarks.model import run_model_bench
+
+    _report(run_model_bench(repeats=repeats, train_steps=train_steps), as_json)
+
+
 def _report(results: dict[str, object], as_json: bool) -> None:
     if as_json:
         click.echo(json.dumps(results))

@@ -1,0 +1,66 @@
+"""numpy pair → disparity: padding to the network's size multiple, device, AMP, cropping back."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from model.network import FusionNetwork
+from model.presets import Config
+
+
+@dataclass
+class Prediction:
+    disparity: np.ndarray  # float32 H×W pixels, the fused disparity
+    stereo: np.ndarray  # float32 H×W pixels, the stereo branch's last iterate
+    mono_align: np.ndarray  # float32 H×W pixels, the aligned mono disparity s_m·D_m + t_m
+    confidence: np.ndarray  # float32 H×W in (0, 1), upsampled from the working resolution
+
+
+class Predictor:
+    """Runs ``network`` (eval mode) on single RGB pairs."""
+
+    def __init__(self, network: FusionNetwork, config: Config, device: str = "cpu") -> None:
+        self.network = network.to(device).eval()
+        self.config, self.device = config, torch.device(device)
+
+    def predict(self, left: np.ndarray, right: np.ndarray, mono: np.ndarray | None = None, *,
+                iters: int | None = None, seed: int = 0) -> Prediction:
+        """``left``/``right`` RGB uint8 H×W×3 of one size; ``mono`` float32 relative disparity of any
+        size (resized, values kept). ``seed`` seeds the flow's noise. ValueError for bad inputs."""
+        for name, image in (("left", left), ("right", right)):
+            if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
+                raise ValueError(f"{name} image must be RGB uint8 H×W×3, got {image.dtype} {image.shape}")
+        if left.shape != right.shape:
+            raise ValueError(f"left and right images differ in size: {left.shape[:2]} vs {right.shape[:2]}")
+        height, width = left.shape[:2]
+        multiple = self.network.size_multiple
+        pad_h, pad_w = -height % multiple, -width % multiple
+
+        def tensor(image: np.ndarray) -> torch.Tensor:
+            t = torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None].float().to(self.device)
+            return F.pad(t, (0, pad_w, 0, pad_h), mode="replicate")
+
+        mono_t = None
+        if mono is not None:
+            mono = np.asarray(mono, dtype=np.float32)
+            if mono.ndim != 2 or not np.isfinite(mono).all():
+                raise ValueError(f"mono must be a finite float H×W map, got shape {mono.shape}")
+            mono_t = torch.from_numpy(mono)[None, None].to(self.device)
+            mono_t = F.interpolate(mono_t, (height, width), mode="bilinear", align_corners=False)
+            mono_t = F.pad(mono_t, (0, pad_w, 0, pad_h), mode="replicate")
+        generator = torch.Generator(device=self.device).manual_seed(seed)
+        amp = self.config.train.amp and self.device.type == "cuda"
+        with torch.inference_mode(), torch.autocast(self.device.type, enabled=amp):
+            out = self.network(tensor(left), tensor(right), mono_t,
+                               iters=iters or self.config.train.test_iters, noise=generator)
+        confidence = F.interpolate(out.confidence.float(), out.disparity.shape[2:], mode="bilinear",
+                                   align_corners=False)
+
+        def crop(t: torch.Tensor) -> np.ndarray:
+            return t[0, 0, :height, :width].float().cpu().numpy().astype(np.float32)
+
+        return Prediction(crop(out.disparity), crop(out.stereo), crop(out.mono_aligned), crop(confidence))

@@ -1,0 +1,133 @@
+"""The fusion model's budget (issue 10): the ``lite`` preset on one 1920×1080 pair, timed in a
+process of its own (peak resident memory from that child's ``getrusage``), beside OpenCV SGBM
+on the same pair in the same run; parameters per module; training steps/s at the lite crop.
+
+The network is randomly initialised: speed and memory do not depend on the weights.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from dataset.synthetic import render_video
+
+# Lite budgets on this class of 2-core machine.
+BUDGET_S, BUDGET_MB = 3.0, 3072.0
+
+
+def _pair(width: int, height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    frame = render_video(0, n_frames=1, width=width, height=height).frames[0]
+    return frame.left, frame.right, frame.mono_disparity.astype(np.float32)
+
+
+def sgbm_seconds(left: np.ndarray, right: np.ndarray, repeats: int) -> float:
+    """Best wall time of OpenCV semi-global block matching (128 disparities, 5×5 blocks)."""
+    matcher = cv2.StereoSGBM_create(minDisparity=0, numDisparities=128, blockSize=5, P1=8 * 3 * 25,
+                                    P2=32 * 3 * 25, mode=cv2.STEREO_SGBM_MODE_SGBM)
+    grey = [cv2.cvtColor(image, cv2.COLOR_RGB2GRAY) for image in (left, right)]
+    times = []
+    for _ in range(repeats):
+        started = time.perf_counter()
+        matcher.compute(*grey)
+        times.append(time.perf_counter() - started)
+    return min(times)
+
+
+def _child(pair_file: str, repeats: int) -> None:
+    """Runs in the subprocess: lite inference on the saved pair, prints one JSON line."""
+    import resource
+
+    import torch
+
+    from model.network import FusionNetwork
+    from model.predictor import Predictor
+    from model.presets import load_preset
+
+    data = np.load(pair_file)
+    config = load_preset("lite")
+    torch.manual_seed(0)
+    predictor = Predictor(FusionNetwork(config.model), config)
+    times = []
+    for _ in range(repeats):
+        started = time.perf_counter()
+        predictor.predict(data["left"], data["right"], data["mono"])
+        times.append(time.perf_counter() - started)
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(json.dumps({"seconds": min(times), "peak_mb": peak_mb, "threads": torch.get_num_threads()}))
+
+
+def parameters_per_module(overrides: dict[str, Any] | None = None) -> dict[str, int]:
+    """Trainable parameter counts of the lite network's top-level modules."""
+    from model.network import FusionNetwork
+    from model.presets import load_preset
+
+    network = FusionNetwork(load_preset("lite", overrides).model)
+    counts = {name: sum(p.numel() for p in module.parameters() if p.requires_grad)
+              for name, module in network.named_children()}
+    counts["total"] = sum(counts.values())
+    return counts
+
+
+def training_steps_per_s(steps: int) -> float:
+    """Forward + loss + backward + AdamW steps per second at the lite crop and batch size."""
+    import torch
+
+    from model.losses import fusion_loss
+    from model.network import FusionNetwork
+    from model.presets import load_preset
+
+    config = load_preset("lite")
+    height, width = config.train.crop
+    torch.manual_seed(0)
+    network = FusionNetwork(config.model).train()
+    optimizer = torch.optim.AdamW(network.trainable_parameters(), lr=config.train.lr)
+    batch = config.train.batch_size
+    left = torch.rand(batch, 3, height, width) * 255
+    right, mono = torch.roll(left, -4, dims=3), torch.rand(batch, 1, height, width)
+    gt, valid = torch.full((batch, 1, height, width), 4.0), torch.ones(batch, 1, height, width, dtype=torch.bool)
+    started = 0.0
+    for step in range(steps + 1):
+        if step == 1:  # the first step warms up allocations
+            started = time.perf_counter()
+        out = network(left, right, mono, iters=config.train.train_iters, noise=torch.Generator().manual_seed(step))
+        loss, _ = fusion_loss(out, gt, valid, config.train)
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+    return steps / (time.perf_counter() - started)
+
+
+def run_model_bench(repeats: int = 2, train_steps: int = 3) -> dict[str, Any]:
+    """The JSON of ``illusion-studio bench model``."""
+    left, right, mono = _pair(1920, 1080)
+    with tempfile.TemporaryDirectory() as tmp:
+        pair_file = Path(tmp) / "pair.npz"
+        np.savez(pair_file, left=left, right=right, mono=mono)
+        code = f"from webapp.benchmarks.model import _child; _child({str(pair_file)!r}, {repeats})"
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        raise RuntimeError(f"the lite benchmark process failed: {done.stderr.strip().splitlines()[-1:]}")
+    child = json.loads(done.stdout.strip().splitlines()[-1])
+    with open("/proc/loadavg") as handle:
+        load = float(handle.read().split()[0])
+    return {
+        "lite_1080p_s": round(child["seconds"], 3),
+        "lite_1080p_peak_mb": round(child["peak_mb"], 1),
+        "sgbm_1080p_s": round(sgbm_seconds(left, right, repeats), 3),
+        "lite_budget_s": BUDGET_S,
+        "lite_budget_mb": BUDGET_MB,
+        "lite_within_budget": child["seconds"] <= BUDGET_S and child["peak_mb"] <= BUDGET_MB,
+        "torch_threads": child["threads"],
+        "load_average_1min": load,
+        "parameters": parameters_per_module(),
+        "train_steps_per_s": round(training_steps_per_s(train_steps), 3),
+    }

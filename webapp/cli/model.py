@@ -1,0 +1,80 @@
+"""``illusion-studio predict``: run a fusion-model checkpoint on one rectified stereo pair."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+import numpy as np
+
+from dataset.formats import FormatError, read_rgb, write_pfm, write_rgb
+from dataset.preview.images import add_colorbar, colorize, value_range
+from model.registry import current_checkpoint
+from webapp.cli.state import CliState, pass_state
+
+OUTPUTS = ("confidence", "stereo", "mono_align")
+_NO_MODEL = ("no --checkpoint given and this workspace has no current model "
+             "(promote a run on the Models page or pass --checkpoint)")
+
+
+@click.command("predict")
+@click.argument("left", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("right", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--checkpoint", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Model checkpoint (default: the workspace's current model).")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="Disparity output (float32 PFM, pixels, left view).")
+@click.option("--mono", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+              help="Relative mono disparity (.pfm, .npy or the authors' .png); any size.")
+@click.option("--preview", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Also write a colour-mapped PNG with a colour bar.")
+@click.option("--outputs", default="", help=f"Comma-separated extra maps: {', '.join(OUTPUTS)} (hyphens ok).")
+@click.option("--iters", type=click.IntRange(min=1), default=None, help="GRU iterations (default: the config's).")
+@click.option("--device", default="cpu", show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the confidence flow's noise.")
+@pass_state
+def predict(state: CliState, left: Path, right: Path, checkpoint: Path | None, out: Path, mono: Path | None,
+            preview: Path | None, outputs: str, iters: int | None, device: str, seed: int) -> None:
+    """Fused disparity of the LEFT/RIGHT rectified pair; extra outputs go beside --out as <stem>_<output>.pfm."""
+    extras = [name.strip().replace("-", "_") for name in outputs.split(",") if name.strip()]
+    unknown = [name for name in extras if name not in OUTPUTS]
+    if unknown:
+        raise click.BadParameter(f"unknown output(s) {', '.join(unknown)}; choose from {', '.join(OUTPUTS)}",
+                                 param_hint="--outputs")
+    if out.suffix.lower() != ".pfm":
+        raise click.BadParameter("must end in .pfm", param_hint="--out")
+    if checkpoint is None:
+        checkpoint = current_checkpoint(state.settings)
+        if checkpoint is None:
+            raise click.ClickException(_NO_MODEL)
+    try:
+        left_rgb, right_rgb = read_rgb(left), read_rgb(right)
+        mono_map = None
+        if mono is not None:
+            from annotation.depth import load_precomputed
+
+            mono_map = load_precomputed(mono)
+    except FormatError as exc:
+        raise click.ClickException(str(exc)) from None
+    from model.checkpoint import load_network
+    from model.predictor import Predictor
+
+    try:
+        network, config, _ = load_network(checkpoint, device)
+        result = Predictor(network, config, device).predict(left_rgb, right_rgb, mono_map, iters=iters, seed=seed)
+    except ValueError as exc:
+        raise click.ClickException(str(exc).splitlines()[0]) from None
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_pfm(out, result.disparity)
+    for name in extras:
+        write_pfm(out.with_name(f"{out.stem}_{name}.pfm"), getattr(result, name))
+    if preview is not None:
+        write_rgb(preview, _preview(result.disparity))
+    click.echo(f"wrote {out} ({result.disparity.shape[1]}×{result.disparity.shape[0]}, "
+               f"disparity {np.nanmin(result.disparity):.2f}–{np.nanmax(result.disparity):.2f} px)")
+
+
+def _preview(disparity: np.ndarray) -> np.ndarray:
+    """RGB uint8: the map in the preview colours with a colour bar labelled in pixels."""
+    lo, hi = value_range(disparity)
+    return add_colorbar(colorize(disparity, lo, hi), lo, hi, unit="px")
