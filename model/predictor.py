@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 import torch
 import torch.nn.functional as F
@@ -36,6 +37,8 @@ class Predictor:
                 raise ValueError(f"{name} image must be RGB uint8 H×W×3, got {image.dtype} {image.shape}")
         if left.shape != right.shape:
             raise ValueError(f"left and right images differ in size: {left.shape[:2]} vs {right.shape[:2]}")
+        full_height, full_width = left.shape[:2]
+        left, right = self._shrunk(left), self._shrunk(right)
         height, width = left.shape[:2]
         multiple = self.network.size_multiple
         pad_h, pad_w = -height % multiple, -width % multiple
@@ -60,7 +63,22 @@ class Predictor:
         confidence = F.interpolate(out.confidence.float(), out.disparity.shape[2:], mode="bilinear",
                                    align_corners=False)
 
-        def crop(t: torch.Tensor) -> np.ndarray:
-            return t[0, 0, :height, :width].float().cpu().numpy().astype(np.float32)
+        def crop(t: torch.Tensor, *, disparity: bool = True) -> np.ndarray:
+            t = t[:, :, :height, :width].float()
+            if (height, width) != (full_height, full_width):  # back to the input's size, in its pixels
+                t = F.interpolate(t, (full_height, full_width), mode="bilinear", align_corners=False)
+                t = t * (full_width / width) if disparity else t
+            return t[0, 0].cpu().numpy().astype(np.float32)
 
-        return Prediction(crop(out.disparity), crop(out.stereo), crop(out.mono_aligned), crop(confidence))
+        return Prediction(crop(out.disparity), crop(out.stereo), crop(out.mono_aligned),
+                          crop(confidence, disparity=False))
+
+    def _shrunk(self, image: np.ndarray) -> np.ndarray:
+        """``image`` resized (area) to at most ``max_inference_pixels``, or as it is."""
+        limit = self.config.model.max_inference_pixels
+        height, width = image.shape[:2]
+        if not limit or height * width <= limit:
+            return image
+        factor = (limit / (height * width)) ** 0.5
+        return cv2.resize(image, (max(1, round(width * factor)), max(1, round(height * factor))),
+                          interpolation=cv2.INTER_AREA)

@@ -64,6 +64,9 @@ class ModelConfig:
     fusion_rule: FusionRule = "paper"  # "released": D = c·D_s + (1−c)·(a·D_m + b), global confident mean
     fusion_dim: int = 32
     fusion_pool_kernel: int = 7  # neighbourhood (working-resolution pixels) pooled for unconfident s_m, t_m
+    # Inference on a larger pair runs on it shrunk to this many pixels (0: never), the disparity
+    # scaled back up: what keeps the CPU-sized preset within its time budget at 1080p.
+    max_inference_pixels: int = 0
 
     def __post_init__(self) -> None:
         if self.n_downsample not in (2, 3):
@@ -72,6 +75,8 @@ class ModelConfig:
             raise ValueError("model.encoder_blocks: the two strided stages need at least one block each")
         if self.token_downsample < self.n_downsample:
             raise ValueError("model.token_downsample must be at least model.n_downsample")
+        if self.max_inference_pixels < 0:
+            raise ValueError("model.max_inference_pixels must be >= 0 (0: full resolution)")
         if self.fusion_pool_kernel % 2 == 0:
             raise ValueError("model.fusion_pool_kernel must be odd")
         if self.flow_dim % self.flow_heads:
