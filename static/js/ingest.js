@@ -33,7 +33,11 @@ function follow(job, row) {
     bar.value = current.progress;
     label.textContent = `ingest job ${current.id}: ${current.state}`;
     if (current.state === "succeeded") {
-      label.textContent += ` — ${current.result.frames} frames (${current.result.dropped_duplicates} near-duplicates dropped)`;
+      const r = current.result;
+      label.textContent = r.skipped
+        ? `already in the workspace as video ${r.video_id} (“${r.video_name}”, ${plural(r.frames, "frame")}): nothing new to ingest`
+        : `ingest job ${current.id}: ${current.state} — ${plural(r.frames, "frame")} `
+          + `(${plural(r.dropped_duplicates, "near-duplicate")} dropped)`;
       stop();
     } else if (["failed", "interrupted"].includes(current.state)) {
       label.textContent += ` — ${current.error}`;
@@ -43,8 +47,24 @@ function follow(job, row) {
   }, 1000);
 }
 
+const plural = (n, word) => `${n} ${word}${n === 1 ? "" : "s"}`;
+const button = form.querySelector("button[type=submit]");
+
 form.addEventListener("submit", async (event) => {
   event.preventDefault();
+  if (button.disabled) return;  // a double click sends the files once
+  button.disabled = true;
+  button.textContent = "Uploading…";
+  try {
+    await uploadAll();
+  } finally {
+    button.disabled = false;
+    button.textContent = "Upload and ingest";
+    form.reset();
+  }
+});
+
+async function uploadAll() {
   const files = [...form.elements.file.files];
   // An unchecked box sends nothing, and the API's default is to prefilter: always say it explicitly.
   const fields = [...new FormData(form)].filter(([key]) => !["file", "prefilter"].includes(key));
@@ -67,5 +87,4 @@ form.addEventListener("submit", async (event) => {
       row.classList.add("failed");
     }
   }
-  form.reset();
-});
+}
