@@ -1,6 +1,7 @@
 // Uploads videos one by one with a byte progress bar (XHR: fetch has no upload progress),
 // then follows each ingest job's progress until it finishes.
 import { api, el, poll } from "./api.js";
+import { summary } from "./job_summary.js";
 
 const form = document.getElementById("upload");
 const list = document.getElementById("uploads");
@@ -31,23 +32,16 @@ function follow(job, row) {
   const stop = poll(async () => {
     const current = await api(`${form.dataset.jobs}/${job.id}`);
     bar.value = current.progress;
-    label.textContent = `ingest job ${current.id}: ${current.state}`;
-    if (current.state === "succeeded") {
-      const r = current.result;
-      label.textContent = r.skipped
-        ? `already in the workspace as video ${r.video_id} (“${r.video_name}”, ${plural(r.frames, "frame")}): nothing new to ingest`
-        : `ingest job ${current.id}: ${current.state} — ${plural(r.frames, "frame")} `
-          + `(${plural(r.dropped_duplicates, "near-duplicate")} dropped)`;
-      stop();
-    } else if (["failed", "interrupted"].includes(current.state)) {
-      label.textContent += ` — ${current.error}`;
-      row.classList.add("failed");
+    const done = ["succeeded", "failed", "interrupted"].includes(current.state);
+    label.replaceChildren(el("a", { href: `${form.dataset.jobPage}${current.id}` }, `ingest job #${current.id}`),
+                          `: ${current.state}${done ? ` — ${summary(current)}` : ""}`);
+    if (done) {
+      row.classList.toggle("failed", current.state !== "succeeded");
       stop();
     }
   }, 1000);
 }
 
-const plural = (n, word) => `${n} ${word}${n === 1 ? "" : "s"}`;
 const button = form.querySelector("button[type=submit]");
 
 form.addEventListener("submit", async (event) => {
