@@ -345,6 +345,9 @@ function strokeEnd() {
   const runs = toRuns(stroke.mask, frame.height, frame.width);
   stroke = null;
   edit((r) => ({ ...r, runs, stale: false }));
+  // the stroke is the latest word on this mask: an older failure or timing no longer applies
+  $("timing").textContent = "";
+  say(`${ui.kind === "illusion" ? "Illusion" : "Support"} of ${pairName(ui.pair)}: painted by hand.`);
 }
 
 function layerOf(pairId, kind, runs) {
