@@ -141,16 +141,49 @@ def test_annotator_clicks_pairs_submits_and_a_second_annotator_works_alongside(b
             page.wait_for_function("([before]) => window.annotator.pairs[0].illusion === before", arg=[before])
         page.wait_for_function("!window.annotator.dirty", timeout=10_000)
 
+        # a brush stroke is the latest word on the mask: the last click's timing and message go
+        page.keyboard.press("b")
+        before = page.evaluate("window.annotator.pairs[0].illusion")
+        cx, cy = page.evaluate("([x, y]) => window.annotator.imageToClient(x, y)", [int(inside[0]) - 8, row])
+        page.mouse.move(cx, cy)
+        page.mouse.down()
+        page.mouse.move(cx, cy + 20, steps=5)
+        page.mouse.up()
+        page.wait_for_function("([b]) => window.annotator.pairs[0].illusion > b", arg=[before])
+        expect(page.locator("#message")).to_have_text("Illusion of plane 1: painted by hand.")
+        expect(page.locator("#timing")).to_have_text("")
+        page.keyboard.press("Control+z")
+        page.keyboard.press("c")
+        page.wait_for_function("!window.annotator.dirty", timeout=10_000)
+
         # its support: the wall band around the picture
         page.keyboard.press("s")
         band = truth(home, frame["index"], "support_00")
         click_image(page, *interior(band))
         page.wait_for_function("window.annotator.pairs[0].support > 0")
+        page.keyboard.press("Enter")  # no type yet: the dialog asks, with its first type focused
+        expect(page.locator("#type-dialog")).to_be_visible()
+        expect(page.locator("#type-dialog .choice").first).to_be_focused()
+        page.keyboard.press("Escape")  # a dismissed submit says why nothing happened
+        expect(page.locator("#message")).to_have_text(re.compile(r"^Not submitted: it needs an illusion type"))
         page.keyboard.press("t")
         expect(page.locator("#type-dialog")).to_be_visible()
         page.keyboard.press("2")
         expect(page.locator("#illusion-type")).to_have_value("picture")
         page.screenshot(path=str(SHOTS / "annotate-1-pair.png"))
+
+        # on a laptop screen with two planes, the frame's actions stay in view (a sticky bar)
+        page.set_viewport_size({"width": 1366, "height": 768})
+        page.keyboard.press("n")
+        assert len(page.evaluate("window.annotator.pairs")) == 2
+        for button in ("#submit", "#delete"):
+            assert page.evaluate("""(sel) => { const b = document.querySelector(sel).getBoundingClientRect();
+                const hit = document.elementFromPoint(b.left + b.width / 2, b.top + b.height / 2);
+                return b.bottom <= innerHeight && hit?.closest(sel) !== null; }""", button), button
+        page.screenshot(path=str(SHOTS / "annotate-1366.png"))
+        page.keyboard.press("Backspace")  # the empty plane goes again
+        assert len(page.evaluate("window.annotator.pairs")) == 1
+        page.set_viewport_size({"width": 1400, "height": 860})
 
         page.keyboard.press("Enter")
         after = shown_frame(page, other_than=frame["id"])

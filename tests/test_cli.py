@@ -92,9 +92,10 @@ def test_demo_without_serving_builds_a_complete_workspace(tmp_path: Path) -> Non
     assert "4 of 4 jobs succeeded" in result.stdout and "6 of 6 jobs succeeded" in result.stdout
     frames = json.loads(cli("--data-dir", str(home), "frames", "list", "--json").stdout)
     states = [f["state"] for f in frames]
-    assert len(frames) == 24
+    assert len(frames) == 28
     # the demo accepts its generated samples, to train on them
     assert states.count("accepted") == 6 and states.count("approved") == 6 and states.count("prefiltered") == 12
+    assert states.count("rejected") == 4  # each video's captioned and blurred frames, by the heuristic prefilter
     # two videos cannot fill train, val and test (no video in two splits): no run, and the reason
     assert "no demo training run" in result.stderr and "2 video(s)" in result.stderr
     again = cli("--data-dir", str(home), "demo", "--no-serve", "--videos", "2")
