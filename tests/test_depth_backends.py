@@ -4,16 +4,13 @@ the registry's errors, and the precomputed formats."""
 
 from __future__ import annotations
 
-import io
 import json
 from pathlib import Path
 
-import cv2
 import numpy as np
 import pytest
 
-from annotation.depth import DepthBackend, DepthError, load_precomputed, make_depth_backend
-from dataset.formats import FormatError, write_authors_disparity, write_pfm
+from annotation.depth import DepthBackend, DepthError, make_depth_backend
 from dataset.synthetic import render_video
 
 torch = pytest.importorskip("torch")
@@ -107,42 +104,3 @@ def test_precomputed_backend_has_no_model(frame: np.ndarray) -> None:
     assert isinstance(backend, DepthBackend) and backend.model_id == "precomputed"
     with pytest.raises(DepthError, match="import a disparity with the frame"):
         backend.estimate(frame)
-
-
-def test_precomputed_formats_from_paths_and_bytes(tmp_path: Path) -> None:
-    rng = np.random.default_rng(0)
-    disparity = rng.uniform(0, 100, (12, 20)).astype(np.float32)
-    write_authors_disparity(tmp_path / "d.png", disparity)
-    from_png = load_precomputed(tmp_path / "d.png")
-    assert from_png.dtype == np.float32 and np.abs(from_png - disparity).max() <= 1 / 32 + 1e-4  # round(d·16)/16
-    np.testing.assert_allclose(load_precomputed(tmp_path / "d.png", scale=0.5), from_png * 8)
-    assert np.array_equal(load_precomputed((tmp_path / "d.png").read_bytes(), "authors_png"), from_png)
-
-    disparity[0, 0] = np.nan
-    write_pfm(tmp_path / "d.pfm", disparity)
-    np.testing.assert_array_equal(load_precomputed(tmp_path / "d.pfm"), disparity)  # NaN kept
-    np.save(tmp_path / "d.npy", disparity.astype(np.float64))
-    from_npy = load_precomputed(tmp_path / "d.npy")
-    assert from_npy.dtype == np.float32
-    np.testing.assert_array_equal(from_npy, disparity)
-    assert np.array_equal(load_precomputed((tmp_path / "d.npy").read_bytes(), "npy"), from_npy, equal_nan=True)
-
-
-def test_precomputed_refuses_what_it_cannot_read(tmp_path: Path) -> None:
-    cv2.imwrite(str(tmp_path / "eight.png"), np.zeros((4, 4), np.uint8))
-    np.save(tmp_path / "rgb.npy", np.zeros((4, 4, 3), np.float32))
-    np.save(tmp_path / "objects.npy", np.array([{"a": 1}], dtype=object))
-    buf = io.BytesIO()
-    np.save(buf, np.zeros((4, 4), bool))
-    for source, kind, message in [
-        (tmp_path / "eight.png", None, "single-channel 16-bit PNG"),
-        (tmp_path / "rgb.npy", None, r"single-channel HxW disparity, got shape \(4, 4, 3\)"),
-        (tmp_path / "objects.npy", None, "not a readable .npy array"),
-        (buf.getvalue(), "npy", "expected real numbers, got dtype bool"),
-        (b"Pf\n4 4\n-1\n", "pfm", "truncated PFM data"),
-        (b"\x89PNG", None, "must be given"),
-        (tmp_path / "d.tiff", None, "unknown disparity format"),
-        (tmp_path / "missing.pfm", None, "cannot read"),
-    ]:
-        with pytest.raises(FormatError, match=message):
-            load_precomputed(source, kind)  # type: ignore[arg-type]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import cv2
@@ -189,3 +190,48 @@ def test_float_maps_unknown_suffix(tmp_path: Path) -> None:
     (tmp_path / "rgb.pfm").write_bytes(b"PF\n1 1\n-1.0\n" + b"\0" * 12)
     with pytest.raises(FormatError, match="single-channel"):
         read_map(tmp_path / "rgb.pfm")
+
+
+def test_float_maps_from_paths_and_bytes_in_both_png_encodings(tmp_path: Path) -> None:
+    rng = np.random.default_rng(0)
+    disparity = rng.uniform(0, 100, (12, 20)).astype(np.float32)
+    write_authors_disparity(tmp_path / "d.png", disparity)
+    authors = read_map(tmp_path / "d.png", png="authors")
+    assert authors.dtype == np.float32 and np.abs(authors - disparity).max() <= 1 / 32 + 1e-4  # round(d·16)/16
+    np.testing.assert_allclose(read_map(tmp_path / "d.png", png="authors", scale=0.5), authors * 8)
+    assert np.array_equal(read_map((tmp_path / "d.png").read_bytes(), suffix=".png", png="authors"), authors)
+    # The same uint16 values read as KITTI: ×1/256 instead of ×1/16, zero → NaN.
+    np.testing.assert_allclose(read_map(tmp_path / "d.png"), np.where(authors > 0, authors / 16, np.nan))
+
+    disparity[0, 0] = np.nan
+    write_pfm(tmp_path / "d.pfm", disparity)
+    np.testing.assert_array_equal(read_map(tmp_path / "d.pfm"), disparity)  # NaN kept
+    np.save(tmp_path / "d.npy", disparity.astype(np.float64))
+    from_npy = read_map(tmp_path / "d.npy")
+    assert from_npy.dtype == np.float64  # dtype kept
+    np.testing.assert_array_equal(from_npy, disparity)
+    assert np.array_equal(read_map((tmp_path / "d.npy").read_bytes(), suffix=".npy"), from_npy, equal_nan=True)
+
+
+def test_float_maps_refuse_what_they_cannot_read(tmp_path: Path) -> None:
+    cv2.imwrite(str(tmp_path / "eight.png"), np.zeros((4, 4), np.uint8))
+    np.save(tmp_path / "rgb.npy", np.zeros((4, 4, 3), np.float32))
+    np.save(tmp_path / "objects.npy", np.array([{"a": 1}], dtype=object))
+    buf = io.BytesIO()
+    np.save(buf, np.zeros((4, 4), bool))
+    for source, options, message in [
+        (tmp_path / "eight.png", {"png": "authors"}, "single-channel 16-bit PNG"),
+        (tmp_path / "eight.png", {}, "single-channel 16-bit PNG"),
+        (tmp_path / "rgb.npy", {}, r"single-channel HxW map, got shape \(4, 4, 3\)"),
+        (tmp_path / "objects.npy", {}, "not a readable .npy array"),
+        (buf.getvalue(), {"suffix": ".npy"}, "expected real numbers, got dtype bool"),
+        (b"Pf\n4 4\n-1\n", {"suffix": ".pfm"}, "truncated PFM data"),
+        (b"\x89PNG", {}, "must be given"),
+        (b"\x89PNG", {"suffix": ".png"}, "not an image OpenCV can decode"),
+        (tmp_path / "d.tiff", {}, "unknown map format"),
+        (tmp_path / "missing.pfm", {}, "cannot read"),
+        (tmp_path / "eight.png", {"png": "jpeg"}, "unknown PNG disparity encoding"),
+        (tmp_path / "eight.png", {"png": "authors", "scale": 0.0}, "scale must be a finite number > 0"),
+    ]:
+        with pytest.raises(FormatError, match=message):
+            read_map(source, **options)

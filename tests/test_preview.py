@@ -10,10 +10,10 @@ import zstandard
 
 from dataset.db import transaction
 from dataset.models import Frame, FrameState, Sample, SourceKind, Video
+from dataset.preview import images, qa
+from dataset.preview.cloud import HIGHLIGHT_RGB, VirtualCamera, disparity_cloud, grid_stride
+from dataset.preview.scene import export_scene
 from dataset.samples import store_outputs
-from webapp.preview import images, qa
-from webapp.preview.cloud import HIGHLIGHT_RGB, VirtualCamera, disparity_cloud, grid_stride
-from webapp.preview.scene import export_scene
 
 H, W = 48, 64
 
@@ -114,6 +114,31 @@ def test_colorize_ends_no_value_and_colour_bar_agree() -> None:
     assert tuple(rgb[0, 2]) == images.NO_VALUE_RGB
     assert images.value_range(values, np.array([[1.0, np.inf]])) == (1.0, 6.0)
     assert images.value_range(np.full((2, 2), np.nan)) == (0.0, 1.0)
+
+
+def test_error_maps_run_dark_to_bright_and_mark_missing_truth() -> None:
+    err = np.array([[0.0, 1.5, 3.0, 30.0, np.nan]], np.float32)
+    rgb = images.colorize_error(err, 3.0)
+    assert rgb.shape == (1, 5, 3) and rgb.dtype == np.uint8
+    brightness = rgb[0, :4].astype(int).sum(axis=1)
+    assert brightness[0] < 10 and brightness[0] < brightness[1] < brightness[2] == brightness[3]
+    assert tuple(rgb[0, 4]) == images.ERROR_NO_VALUE_RGB
+    np.testing.assert_array_equal(images.colorize_error(-err, 3.0), rgb)  # signed errors by magnitude
+    with pytest.raises(ValueError, match="max_px"):
+        images.colorize_error(err, 0.0)
+
+
+def test_colour_bar_is_appended_with_the_map_high_at_the_top() -> None:
+    disparity = np.tile(np.linspace(0, 10, 64, dtype=np.float32), (48, 1))
+    rgb = images.colorize(disparity, 0.0, 10.0)
+    figure = images.add_colorbar(rgb, 0.0, 10.0)
+    assert figure.shape[0] == 48 and figure.shape[1] > 64 and figure.dtype == np.uint8
+    np.testing.assert_array_equal(figure[:, :64], rgb)
+    bar = figure[:, 64 + 4 + 1]  # one column inside the bar
+    assert np.abs(bar[0].astype(int) - rgb[0, -1]).sum() <= 12  # top = hi
+    assert np.abs(bar[-1].astype(int) - rgb[0, 0]).sum() <= 12  # bottom = lo
+    error_bar = images.add_colorbar(images.colorize_error(disparity, 10.0), 0.0, 10.0, error=True)[:, 64 + 4 + 1]
+    assert error_bar[0].astype(int).sum() > error_bar[-1].astype(int).sum()
 
 
 def test_anaglyph_holes_and_outlines() -> None:
@@ -274,7 +299,7 @@ def test_frame_preview_redirects_to_the_newest_sample_or_explains(client, tokens
 def test_the_render_cache_keeps_within_its_budget(tmp_path) -> None:  # type: ignore[no-untyped-def]
     import os
 
-    from webapp.preview.cache import RenderCache
+    from dataset.preview.cache import RenderCache
 
     cache = RenderCache(tmp_path / "preview", budget_bytes=2500)
     first = cache.get_or_make({"sample": 1}, "png", lambda: b"a" * 1000)

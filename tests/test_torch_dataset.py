@@ -51,6 +51,23 @@ def test_items_are_tensors_that_match_the_files(native: Path) -> None:
     assert not capture["valid"][0, :6, :10].any() and (capture["disparity"][0, :6, :10] == 0).all()
 
 
+def test_right_view_holes_leave_valid_alone(native: Path) -> None:
+    """``valid`` is about left pixels; holes are right-view pixels (NATIVE_FORMAT.md): a left pixel
+    at the coordinates of a hole keeps its disparity and stays valid."""
+    checked = 0
+    for name in ("train", "test"):
+        dataset = IllusionStereoDataset(native, name)
+        for i, entry in enumerate(dataset.samples):
+            if "holes" not in entry["files"] or "valid" in entry["files"]:
+                continue
+            holes = read_mask(native / entry["files"]["holes"]["path"])
+            finite = np.isfinite(read_pfm(native / entry["files"]["disparity"]["path"]))
+            valid = dataset[i]["valid"][0].numpy()
+            assert valid[holes & finite].all() and not valid[~finite].any()
+            checked += int((holes & finite).sum())
+    assert checked > 0  # the export does have holes over finite disparities
+
+
 def test_dataloader_batches(native: Path) -> None:
     dataset = IllusionStereoDataset(native, "train")
     batches = list(DataLoader(dataset, batch_size=2, num_workers=0))

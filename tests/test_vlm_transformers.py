@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from annotation.checkpoints import fingerprint
 from annotation.vlm import PROMPT_VERSION, make_backend
 from dataset.synthetic import render_video
 
@@ -91,7 +92,7 @@ def test_tiny_checkpoint_loads_and_noise_becomes_unparsed(tiny_model: Path) -> N
     backend.close()
     assert elapsed < 20
     assert backend.name == "transformers" and backend.prompt_version == PROMPT_VERSION
-    assert backend.model_id == f"qwen2_vl:{tiny_model.name}"
+    assert backend.model_id == f"qwen2_vl:{tiny_model.name}:{fingerprint(tiny_model)}"
     assert len(verdicts) == 2
     for verdict in verdicts:
         assert verdict.raw.strip(), "the noise decodes to words"
@@ -127,7 +128,7 @@ def test_a_failing_batch_fails_only_its_own_frames(tiny_model: Path, monkeypatch
 
 
 def test_a_directory_without_a_model_is_a_clear_error(tmp_path: Path) -> None:
-    with pytest.raises(ValueError, match="cannot load a Qwen2-VL model") as raised:
+    with pytest.raises(ValueError, match="not a Qwen2-VL checkpoint directory") as raised:
         make_backend("transformers", model_path=tmp_path)
     assert "\n" not in str(raised.value)
     with pytest.raises(ValueError, match="not a directory"):

@@ -12,8 +12,6 @@ without a processor config gets the released checkpoints' settings.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 from pathlib import Path
 
@@ -21,13 +19,13 @@ import numpy as np
 import torch
 from transformers import AutoImageProcessor, AutoModelForDepthEstimation, DPTImageProcessorPil
 
+from annotation.checkpoints import CONFIG_FILE, PROCESSOR_FILE, open_checkpoint
 from annotation.depth.base import DepthError, check_image
 
 # preprocessor_config.json of the released Depth-Anything-V2-*-hf checkpoints.
 _RELEASED_PROCESSOR = dict(size={"height": 518, "width": 518}, keep_aspect_ratio=True, ensure_multiple_of=14,
                            resample=3, do_rescale=True, rescale_factor=1 / 255, do_normalize=True,
                            image_mean=[0.485, 0.456, 0.406], image_std=[0.229, 0.224, 0.225], do_pad=False)
-_PROCESSOR_FILE = "preprocessor_config.json"
 
 
 class DepthAnythingBackend:
@@ -36,24 +34,19 @@ class DepthAnythingBackend:
     name = "depth-anything-v2"
 
     def __init__(self, model_path: Path, device: str = "cpu") -> None:
-        self.model_path = Path(model_path)
-        config_file = self.model_path / "config.json"
-        try:
-            config = json.loads(config_file.read_text())
-        except (OSError, ValueError) as exc:
-            raise ValueError(f"{self.model_path} is not a Depth Anything checkpoint directory: {exc}") from exc
-        if config.get("model_type") != "depth_anything":
-            raise ValueError(f"{config_file} is a {config.get('model_type')!r} model, not depth_anything")
-        if config.get("depth_estimation_type", "relative") != "relative":
-            raise ValueError(f"{config_file} is a metric-depth checkpoint; a relative (disparity) one is needed")
+        checkpoint = open_checkpoint(model_path, "Depth Anything", {"depth_anything"})
+        self.model_path = checkpoint.path
+        if checkpoint.config.get("depth_estimation_type", "relative") != "relative":
+            raise ValueError(f"{self.model_path / CONFIG_FILE} is a metric-depth checkpoint; "
+                             "a relative (disparity) one is needed")
         try:
             self.device = torch.device(device)
         except RuntimeError as exc:
             raise ValueError(f"bad torch device {device!r}: {exc}") from None
-        self.model_id = f"{self.name}:{self.model_path.name}:{_fingerprint(self.model_path)}"
+        self.model_id = checkpoint.model_id(self.name)
         try:
             self.model = AutoModelForDepthEstimation.from_pretrained(self.model_path).to(self.device).eval()
-            if (self.model_path / _PROCESSOR_FILE).is_file():
+            if (self.model_path / PROCESSOR_FILE).is_file():
                 self.processor = AutoImageProcessor.from_pretrained(self.model_path, backend="pil")
             else:
                 self.processor = DPTImageProcessorPil(**_RELEASED_PROCESSOR)
@@ -76,14 +69,3 @@ class DepthAnythingBackend:
             [result] = self.processor.post_process_depth_estimation(outputs, target_sizes=[(height, width)])
         return result["predicted_depth"].float().cpu().numpy().reshape(height, width)
 
-
-def _fingerprint(model_path: Path) -> str:
-    """12 hex digits over the configs and the weight files' names and sizes: cheap to compute,
-    and it changes when the checkpoint in the directory is replaced."""
-    digest = hashlib.sha256()
-    for name in ("config.json", _PROCESSOR_FILE):
-        path = model_path / name
-        digest.update(path.read_bytes() if path.is_file() else b"-")
-    for path in sorted(model_path.glob("*.safetensors")) + sorted(model_path.glob("*.bin")):
-        digest.update(f"{path.name}:{path.stat().st_size}".encode())
-    return digest.hexdigest()[:12]

@@ -8,7 +8,6 @@ checkpoint). Embeddings are cached on disk by image content and model id.
 from annotation.segment.base import Embedding, MaskCandidate, Segmenter, SegmentError
 from annotation.segment.cache import EmbeddingCache, cached_embedding, image_sha256
 from annotation.segment.registry import SEGMENTERS, make_segmenter
-from annotation.segment.rle import mask_to_rle, rle_to_mask
 
 __all__ = [
     "SEGMENTERS",
@@ -20,6 +19,4 @@ __all__ = [
     "cached_embedding",
     "image_sha256",
     "make_segmenter",
-    "mask_to_rle",
-    "rle_to_mask",
 ]

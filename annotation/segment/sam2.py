@@ -16,7 +16,6 @@ low-resolution mask logits resized back to the image and thresholded at 0.
 
 from __future__ import annotations
 
-import hashlib
 import json
 from collections.abc import Sequence
 from pathlib import Path
@@ -26,6 +25,7 @@ import numpy as np
 import torch
 from transformers import Sam2Model, Sam2VideoInferenceSession, Sam2VideoModel
 
+from annotation.checkpoints import PROCESSOR_FILE, open_checkpoint
 from annotation.segment.base import (
     Box,
     Embedding,
@@ -51,19 +51,11 @@ class Sam2Segmenter:
     name = "sam2"
 
     def __init__(self, model_path: Path, device: str = "cpu") -> None:
-        self.model_path = Path(model_path)
-        config_file = self.model_path / "config.json"
-        try:
-            config_text = config_file.read_text()
-            model_type = json.loads(config_text)["model_type"]
-        except (OSError, ValueError, KeyError) as exc:
-            raise ValueError(f"{self.model_path} is not a SAM2 checkpoint directory: {exc}") from exc
-        if model_type not in ("sam2", "sam2_video"):
-            raise ValueError(f"{config_file} is a {model_type!r} model, not sam2 or sam2_video")
-        self.has_video = model_type == "sam2_video"
+        checkpoint = open_checkpoint(model_path, "SAM2", {"sam2", "sam2_video"})
+        self.model_path = checkpoint.path
+        self.has_video = checkpoint.model_type == "sam2_video"
         self.device = torch.device(device)
-        digest = hashlib.sha256(config_text.encode()).hexdigest()[:12]
-        self.model_id = f"sam2:{self.model_path.name}:{digest}"
+        self.model_id = checkpoint.model_id(self.name)
         self.model = Sam2Model.from_pretrained(self.model_path).to(self.device).eval()
         self._video_model: Sam2VideoModel | None = None
         self.input_size = int(self.model.config.prompt_encoder_config.image_size)
@@ -169,7 +161,7 @@ def _pixel_statistics(model_path: Path) -> tuple[np.ndarray, np.ndarray]:
     """(mean, std) float32 (3,) for normalising [0, 1] RGB: the directory's processor config
     when present, else ImageNet's (what every SAM2 checkpoint uses)."""
     mean, std = _IMAGENET_MEAN, _IMAGENET_STD
-    config = model_path / "preprocessor_config.json"
+    config = model_path / PROCESSOR_FILE
     if config.is_file():
         values = json.loads(config.read_text())
         mean, std = values.get("image_mean", mean), values.get("image_std", std)

@@ -27,12 +27,11 @@ import numpy as np
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from annotation.depth import load_precomputed
 from dataset.capture.errors import CaptureError
 from dataset.capture.files import files_by_stem, matched_stems, names, trailing_number
 from dataset.capture.layout import IMAGE_SUFFIXES
 from dataset.db import transaction
-from dataset.formats import FormatError, read_rgb
+from dataset.formats import FormatError, read_map, read_rgb
 from dataset.models import Frame, Video
 from dataset.samples import store_outputs
 from dataset.services.errors import NotFound
@@ -136,7 +135,7 @@ def _by_order(stems: list[str], frames: list[Any], video_id: int) -> list[Any]:
 def _read_disparity(item: ReconstructionFiles) -> np.ndarray:
     """float32 HxW pixels, the frame's size, with at least one finite value."""
     try:
-        disparity = load_precomputed(item.disparity)
+        disparity = read_map(item.disparity).astype(np.float32, copy=False)
     except FormatError as exc:
         raise CaptureError(str(exc)) from None
     _check_size(item.disparity, disparity.shape, item)

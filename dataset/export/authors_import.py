@@ -60,7 +60,7 @@ def read_authors(root: Path, progress: Progress) -> list[PendingSample]:
         entries += [(right, partial(_training, root, right, scale)) for right, scale in factors.items()]
     if index.is_file():
         entries += [(f"{scene}/{obj}/{frame_id}", partial(_testing, root, paths, (scene, obj, frame_id)))
-                    for (scene, obj, frame_id), paths in _load_index(index).items()]
+                    for (scene, obj, frame_id), paths in load_testing_index(index).items()]
     pending = []
     for done, (name, check) in enumerate(entries, start=1):
         pending.append(PendingSample(name, check()))
@@ -134,7 +134,8 @@ class _PlainData(pickle.Unpickler):
         raise pickle.UnpicklingError(f"refusing to load {module}.{name}: the index holds plain data only")
 
 
-def _load_index(path: Path) -> dict[tuple[str, str, str], dict[str, str]]:
+def load_testing_index(path: Path) -> dict[tuple[str, str, str], dict[str, str]]:
+    """``testing_enter.pkl`` as {(scene, obj, id): {left, right, disp, mask: path}}, read as plain data only."""
     try:
         with path.open("rb") as fh:
             data = _PlainData(fh).load()
@@ -149,12 +150,17 @@ def _load_index(path: Path) -> dict[tuple[str, str, str], dict[str, str]]:
     return data
 
 
+def testing_files(root: Path, entry: dict[str, str], key: tuple[str, str, str]) -> dict[str, Path]:
+    """The files of one index entry (under ``testing/`` or ``real_data/testing/``), all inside ``root``."""
+    base = next((root / t for t in TESTING_ROOTS if (root / t / entry["left"]).is_file()), root / TESTING)
+    return _within(root, {part: base / entry[part] for part in TESTING_PARTS}, f"{TESTING_INDEX} entry {key}")
+
+
 def _testing(root: Path, entry: dict[str, str], key: tuple[str, str, str]) -> Any:
     scene, obj, frame_id = key
     if not frame_id.isdigit():
         raise LayoutError(f"{root / TESTING_INDEX}: frame id {frame_id!r} of {scene}/{obj} is not a number")
-    base = next((root / t for t in TESTING_ROOTS if (root / t / entry["left"]).is_file()), root / TESTING)
-    paths = _within(root, {part: base / entry[part] for part in TESTING_PARTS}, f"{TESTING_INDEX} entry {key}")
+    paths = testing_files(root, entry, key)
     mask = paths.pop("mask")
     height, width = _check_files(paths, {"left": 3, "right": 3, "disp": 1}, {"illusion_00": [mask]},
                                  f"{TESTING_INDEX} entry {key}")

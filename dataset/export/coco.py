@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from annotation.segment import mask_to_rle
 from dataset.export.records import SampleRecord
+from dataset.formats import mask_to_rle
 from dataset.models import IllusionType, RegionKind
 
 UNSPECIFIED = "unspecified"

@@ -13,9 +13,9 @@ from typing import Literal
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from annotation.segment import mask_to_rle
 from dataset.export.coco import parse_mask_name
 from dataset.export.records import SampleRecord
+from dataset.formats import mask_to_rle
 from dataset.media import MediaStore
 from dataset.models import (
     Annotation,

@@ -10,9 +10,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from dataset.export.errors import LayoutError
-from dataset.export.manifest import read_manifest
-from dataset.formats import read_mask, read_pfm, read_rgb
+from dataset.readers.native import NativeReader
 
 Item = dict[str, Any]
 
@@ -22,49 +20,34 @@ class IllusionStereoDataset(Dataset[Item]):
 
     - ``left``, ``right``: float32 3xHxW in [0, 1] (RGB);
     - ``disparity``: float32 1xHxW, pixels, the training target (NaN and inf → 0);
-    - ``valid``: bool 1xHxW, finite disparity ∧ the sample's valid mask (captures). Right-view
-      holes do not enter: they are in right-view pixels, and every left pixel keeps its disparity;
-    - ``illusion``: bool 1xHxW, the union of the sample's illusion masks;
+    - ``valid``: bool 1xHxW, finite disparity ∧ the sample's valid mask (captures); right-view
+      holes never enter it (why: ``NATIVE_FORMAT.md``, "In PyTorch");
+    - ``illusion``: bool 1xHxW, the union of the sample's illusion masks, where ``valid``;
     - ``meta``: {"id", "video", "index", "scale"} (str, str, int, float: default collation works).
 
-    ``transform`` (optional) maps that dict to whatever the model wants.
+    ``transform`` (optional) maps that dict to whatever the model wants. The files are read by
+    :class:`dataset.readers.native.NativeReader`.
     """
 
     def __init__(self, root: str | Path, split: str = "train", transform: Callable[[Item], Any] | None = None) -> None:
-        self.root = Path(root)
-        manifest = read_manifest(self.root)
-        names = [s["name"] for s in manifest["splits"]]
-        if split not in names:
-            raise LayoutError(f"{self.root}: no split {split!r}; this export has {', '.join(names)}")
-        self.samples = [s for s in manifest["samples"] if s["split"] == split]
+        self.reader = NativeReader(Path(root), split, mono=False)
+        self.root = self.reader.root
+        self.samples = self.reader.entries
         self.transform = transform
 
     def __len__(self) -> int:
-        return len(self.samples)
+        return len(self.reader)
 
     def __getitem__(self, i: int) -> Any:
-        entry = self.samples[i]
-        files = entry["files"]
-        disparity = read_pfm(self._path(files["disparity"]))
-        finite = np.isfinite(disparity)
-        valid = finite.copy()
-        if "valid" in files:
-            valid &= read_mask(self._path(files["valid"]))
-        illusion = np.zeros_like(valid)
-        for name, spec in files.get("masks", {}).items():
-            if name.startswith("illusion_"):
-                illusion |= read_mask(self._path(spec))
+        sample = self.reader[i]
+        valid = sample.regions["all"]
         item = {
-            "left": _image(read_rgb(self._path(files["left"]))), "right": _image(read_rgb(self._path(files["right"]))),
-            "disparity": torch.from_numpy(np.where(finite, disparity, np.float32(0))[None].astype(np.float32)),
-            "valid": torch.from_numpy(valid[None]), "illusion": torch.from_numpy(illusion[None]),
-            "meta": {"id": entry["id"], "video": entry["video"], "index": entry["frame"]["index"],
-                     "scale": float(entry["params"].get("scale", 1.0))},
+            "left": _image(sample.left), "right": _image(sample.right),
+            "disparity": torch.from_numpy(np.where(valid, sample.disparity, np.float32(0))[None].astype(np.float32)),
+            "valid": torch.from_numpy(valid[None]), "illusion": torch.from_numpy(sample.regions["illusion"][None]),
+            "meta": {key: sample.meta[key] for key in ("id", "video", "index", "scale")},
         }
         return self.transform(item) if self.transform else item
-
-    def _path(self, spec: dict[str, str]) -> Path:
-        return self.root / spec["path"]
 
 
 def _image(rgb: np.ndarray) -> torch.Tensor:

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 
 from dataset.formats.errors import FormatError
-from dataset.formats.images import read_image, write_png
+from dataset.formats.images import decode_image, read_bytes, write_png
 
 KITTI_FACTOR = 256
 AUTHORS_FACTOR = 16
@@ -33,7 +33,12 @@ def write_kitti_disparity(path: str | Path, disparity: np.ndarray) -> None:
 
 def read_kitti_disparity(path: str | Path) -> np.ndarray:
     """Read a KITTI disparity PNG as float32 HxW pixels, NaN where invalid (stored 0)."""
-    raw = _read_uint16(path)
+    return decode_kitti_disparity(read_bytes(path), str(path))
+
+
+def decode_kitti_disparity(data: bytes, name: str = "KITTI disparity PNG") -> np.ndarray:
+    """KITTI PNG bytes → float32 HxW pixels, NaN where invalid (``name`` goes into errors)."""
+    raw = _decode_uint16(data, name)
     return np.where(raw > 0, raw.astype(np.float32) / KITTI_FACTOR, np.float32(np.nan))
 
 
@@ -47,9 +52,14 @@ def write_authors_disparity(path: str | Path, disparity: np.ndarray) -> None:
 
 def read_authors_disparity(path: str | Path, scale: float) -> np.ndarray:
     """Read an authors' ``depth_rect`` PNG as float32 training disparity = uint16 · ``scale``."""
+    return decode_authors_disparity(read_bytes(path), str(path), scale)
+
+
+def decode_authors_disparity(data: bytes, name: str = "authors' disparity PNG", scale: float = 1 / AUTHORS_FACTOR) -> np.ndarray:
+    """Authors' PNG bytes → float32 HxW disparity = uint16 · ``scale`` (1/16: their unscaled d)."""
     if not (np.isfinite(scale) and scale > 0):
         raise FormatError(f"scale must be a finite number > 0, got {scale}")
-    return _read_uint16(path).astype(np.float32) * np.float32(scale)
+    return _decode_uint16(data, name).astype(np.float32) * np.float32(scale)
 
 
 def read_scale_factors(path: str | Path) -> dict[str, float]:
@@ -104,8 +114,8 @@ def _encode(disp: np.ndarray, factor: int, path: str | Path) -> np.ndarray:
     return scaled.astype(np.uint16)
 
 
-def _read_uint16(path: str | Path) -> np.ndarray:
-    raw = read_image(path, cv2.IMREAD_UNCHANGED)
+def _decode_uint16(data: bytes, name: str) -> np.ndarray:
+    raw = decode_image(data, name, cv2.IMREAD_UNCHANGED)
     if raw.dtype != np.uint16 or raw.ndim != 2:
-        raise FormatError(f"{path}: expected a single-channel 16-bit PNG, got {raw.dtype} with shape {raw.shape}")
+        raise FormatError(f"{name}: expected a single-channel 16-bit PNG, got {raw.dtype} with shape {raw.shape}")
     return raw

@@ -1,40 +1,76 @@
-"""Float HxW maps (disparity, depth) on disk, the format chosen by the file suffix.
+"""Float HxW maps (disparity, depth) in files or bytes, the format chosen by the file suffix.
 
-``.pfm`` (float32, NaN kept), ``.npy`` (dtype kept) and ``.png`` (KITTI uint16 disparity
-×256, invalid = 0 ↔ NaN; disparity only).
+``.pfm`` (float32, NaN kept), ``.npy`` (real dtype kept; no pickles) and ``.png``: a 16-bit
+disparity PNG in the encoding ``png`` names — ``"kitti"`` (uint16 = round(d·256), 0 = invalid ↔
+NaN; what :func:`write_map` writes) or ``"authors"`` (their ``depth_rect``: disparity =
+uint16 · ``scale``, 1/16 giving their unscaled disparity, no invalid marker).
 """
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 
-from dataset.formats.disparity_png import read_kitti_disparity, write_kitti_disparity
+from dataset.formats.disparity_png import (
+    AUTHORS_FACTOR,
+    decode_authors_disparity,
+    decode_kitti_disparity,
+    write_kitti_disparity,
+)
 from dataset.formats.errors import FormatError
-from dataset.formats.pfm import read_pfm, write_pfm
+from dataset.formats.images import read_bytes
+from dataset.formats.pfm import decode_pfm, write_pfm
 
 MAP_SUFFIXES = (".pfm", ".npy", ".png")
+PngEncoding = Literal["kitti", "authors"]
+PNG_ENCODINGS: tuple[PngEncoding, ...] = ("kitti", "authors")
 
 
-def read_map(path: str | Path) -> np.ndarray:
-    """Read a float HxW map from ``.pfm``, ``.npy`` or KITTI ``.png``."""
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix == ".pfm":
-        data = read_pfm(path)
-    elif suffix == ".npy":
-        try:
-            data = np.load(path, allow_pickle=False)
-        except (OSError, ValueError) as exc:
-            raise FormatError(f"{path}: not a readable .npy array: {exc}") from None
-    elif suffix == ".png":
-        data = read_kitti_disparity(path)
+def read_map(source: str | Path | bytes, *, suffix: str | None = None, png: PngEncoding = "kitti",
+             scale: float = 1 / AUTHORS_FACTOR) -> np.ndarray:
+    """Read a float HxW map from a file, or from its bytes with ``suffix`` naming the format.
+
+    ``png`` picks the PNG disparity encoding (``scale`` applies to ``"authors"`` only). Raises
+    :class:`FormatError` naming the source for anything that is not a single-channel map.
+    """
+    if png not in PNG_ENCODINGS:
+        raise FormatError(f"unknown PNG disparity encoding {png!r}; use one of {', '.join(PNG_ENCODINGS)}")
+    if isinstance(source, bytes):
+        if suffix is None:
+            raise FormatError(f"the format of in-memory map data must be given: suffix one of {', '.join(MAP_SUFFIXES)}")
+        name = "map data"
     else:
-        raise FormatError(f"{path}: unknown map format; use one of {', '.join(MAP_SUFFIXES)}")
-    if data.ndim != 2:
-        raise FormatError(f"{path}: expected a single-channel HxW map, got shape {data.shape}")
-    return data
+        name = str(source)
+        suffix = suffix or Path(source).suffix
+    suffix = suffix.lower()
+    if suffix not in MAP_SUFFIXES:
+        raise FormatError(f"{name}: unknown map format; use one of {', '.join(MAP_SUFFIXES)}")
+    data = source if isinstance(source, bytes) else read_bytes(source)
+    if suffix == ".pfm":
+        array = decode_pfm(data, name)
+    elif suffix == ".npy":
+        array = decode_npy(data, name)
+    elif png == "kitti":
+        array = decode_kitti_disparity(data, name)
+    else:
+        array = decode_authors_disparity(data, name, scale)
+    if array.ndim != 2:
+        raise FormatError(f"{name}: expected a single-channel HxW map, got shape {array.shape}")
+    return array
+
+
+def decode_npy(data: bytes, name: str = "npy data") -> np.ndarray:
+    """``.npy`` bytes → the array (real numbers only, no pickles; ``name`` goes into errors)."""
+    try:
+        array = np.load(io.BytesIO(data), allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise FormatError(f"{name}: not a readable .npy array: {exc}") from None
+    if array.dtype == np.bool_ or array.dtype.kind not in "iuf":
+        raise FormatError(f"{name}: expected real numbers, got dtype {array.dtype}")
+    return array
 
 
 def write_map(path: str | Path, array: np.ndarray) -> None:

@@ -10,14 +10,27 @@ import numpy as np
 from dataset.formats.errors import FormatError
 
 
-def read_image(path: str | Path, flags: int = cv2.IMREAD_UNCHANGED) -> np.ndarray:
-    """``cv2.imread`` that raises :class:`FormatError` for a missing or undecodable file."""
+def read_bytes(path: str | Path) -> bytes:
+    """A file's bytes; :class:`FormatError` naming the file when it is missing or unreadable."""
     path = Path(path)
     if not path.is_file():
-        raise FormatError(f"{path}: file not found")
-    image = cv2.imread(str(path), flags)
+        raise FormatError(f"{path}: cannot read: file not found")
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise FormatError(f"{path}: cannot read: {exc}") from None
+
+
+def read_image(path: str | Path, flags: int = cv2.IMREAD_UNCHANGED) -> np.ndarray:
+    """``cv2.imread`` that raises :class:`FormatError` for a missing or undecodable file."""
+    return decode_image(read_bytes(path), str(path), flags)
+
+
+def decode_image(data: bytes, name: str, flags: int = cv2.IMREAD_UNCHANGED) -> np.ndarray:
+    """``cv2.imdecode`` of a file's bytes; :class:`FormatError` naming ``name`` if undecodable."""
+    image = cv2.imdecode(np.frombuffer(data, np.uint8), flags) if data else None
     if image is None:
-        raise FormatError(f"{path}: not an image OpenCV can decode")
+        raise FormatError(f"{name}: not an image OpenCV can decode")
     return image
 
 

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from dataset.formats.errors import FormatError
+from dataset.formats.images import read_bytes
 
 # Magic, width, height and scale, each followed by whitespace; the data starts one byte later.
 _HEADER = re.compile(rb"\A(P[Ff])\s+(\d+)\s+(\d+)\s+([-+0-9.eE]+)\s")
@@ -19,12 +20,7 @@ _HEADER = re.compile(rb"\A(P[Ff])\s+(\d+)\s+(\d+)\s+([-+0-9.eE]+)\s")
 
 def read_pfm(path: str | Path) -> np.ndarray:
     """Read a PFM file as float32 HxW ("Pf") or HxWx3 ("PF"), native byte order."""
-    path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise FormatError(f"{path}: cannot read: {exc}") from None
-    return decode_pfm(raw, str(path))
+    return decode_pfm(read_bytes(path), str(path))
 
 
 def decode_pfm(raw: bytes, name: str = "PFM data") -> np.ndarray:

@@ -3,7 +3,7 @@ right-view synthesis and depth reprojection (no Flask, DB or torch imports)."""
 
 from dataset.geometry.calibration import RigCalibration, load_calibration, parse_calibration, save_calibration
 from dataset.geometry.camera import backproject, depth_to_disparity, disparity_to_depth
-from dataset.geometry.consistency import Consistency, psnr, stereo_consistency
+from dataset.geometry.consistency import Consistency, psnr, sgbm_disparity, stereo_consistency
 from dataset.geometry.errors import (
     CalibrationError,
     DegenerateSupportError,
@@ -59,6 +59,7 @@ __all__ = [
     "ring_mask",
     "save_calibration",
     "search_disparity_scale",
+    "sgbm_disparity",
     "psnr",
     "stereo_consistency",
     "synthesize_right_view",

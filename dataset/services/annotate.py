@@ -23,9 +23,10 @@ from sqlalchemy.dialects.postgresql import insert as postgresql_insert
 from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 from sqlalchemy.orm import Session
 
-from annotation.segment import Embedding, EmbeddingCache, Segmenter, SegmentError, make_segmenter, mask_to_rle, rle_to_mask
+from annotation.segment import Embedding, EmbeddingCache, Segmenter, SegmentError, make_segmenter
 from annotation.segment.cache import cached_embedding
 from dataset.db import transaction
+from dataset.formats import FormatError, mask_to_rle, rle_to_mask
 from dataset.media import MediaStore
 from dataset.models import Annotation, Frame, FrameState, IllusionType, Region, RegionKind, User, utcnow
 from dataset.services import audit
@@ -222,7 +223,7 @@ def _parse_regions(regions: Sequence[Any], height: int, width: int, *, require_i
         seen.add((pair, kind))
         try:
             mask = rle_to_mask(r.get("mask"))
-        except SegmentError as exc:
+        except FormatError as exc:
             raise InvalidInput(f"region {n}: {exc}") from None
         if mask.shape != (height, width):
             raise InvalidInput(f"region {n}: mask is {mask.shape[1]}x{mask.shape[0]}, the frame {width}x{height}")
@@ -307,7 +308,7 @@ def segment(settings: Any, media: MediaStore, frame: Frame, body: dict[str, Any]
         prev = rle_to_mask(body["prev_mask"]) if body.get("prev_mask") else None
         embedding, cached = _hot_embedding(settings, segmenter, frame, media)
         candidates = segmenter.predict(embedding, points, labels, box, prev)
-    except SegmentError as exc:
+    except (SegmentError, FormatError) as exc:
         raise InvalidInput(str(exc)) from None
     best = candidates[0]
     mask = best.mask

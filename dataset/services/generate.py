@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 from sqlalchemy import select
 
-from annotation.segment import rle_to_mask
 from dataset.db import transaction
+from dataset.formats import rle_to_mask
 from dataset.geometry import (
     GeometryError,
     RegionMasks,

@@ -6,7 +6,7 @@ from flask import g
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
-from annotation.segment import SegmentError, rle_to_mask
+from dataset.formats import FormatError, rle_to_mask
 from dataset.models import Frame, RegionKind, Role, User
 from dataset.services import annotate
 from dataset.services import jobs as job_service
@@ -115,7 +115,7 @@ def propagate(frame_id: int) -> ResponseReturnValue:
     frame = get_or_404(Frame, frame_id, "frame")
     try:
         shape = rle_to_mask(body.get("mask")).shape
-    except SegmentError as exc:
+    except FormatError as exc:
         raise InvalidInput(f"mask: {exc}") from None
     if shape != (frame.height, frame.width):
         raise InvalidInput(f"mask is {shape[1]}x{shape[0]}, the frame {frame.width}x{frame.height}")

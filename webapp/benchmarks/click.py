@@ -22,9 +22,10 @@ import cv2
 import httpx
 import numpy as np
 
-from annotation.segment import Embedding, mask_to_rle, rle_to_mask
+from annotation.segment import Embedding
 from annotation.segment.benchmark import default_sam2_dir, person_click
 from dataset.db import transaction
+from dataset.formats import mask_to_rle, rle_to_mask
 from dataset.models import Frame, User
 from dataset.services import annotate
 from dataset.services import users as user_service

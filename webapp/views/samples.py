@@ -16,11 +16,11 @@ from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
 from dataset.models import Frame, Role, SampleState
+from dataset.preview import images, qa
+from dataset.preview.cache import RenderCache
+from dataset.preview.sample_preview import STAGES, SamplePreview
 from dataset.services import sample_review
 from webapp.auth import requires
-from webapp.preview import images, qa
-from webapp.preview.cache import RenderCache
-from webapp.preview.sample_preview import STAGES, SamplePreview
 from webapp.runtime import runtime
 
 samples = Blueprint("samples", __name__)

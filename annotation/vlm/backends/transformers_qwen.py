@@ -22,6 +22,7 @@ import numpy as np
 import torch
 from transformers import AutoImageProcessor, AutoModelForImageTextToText, AutoTokenizer
 
+from annotation.checkpoints import open_checkpoint
 from annotation.vlm.prompt import ANSWER_TOKEN_BUDGET, PROMPT, PROMPT_VERSION
 from annotation.vlm.rule import KeepRule
 from annotation.vlm.verdict import Verdict, image_problem
@@ -45,9 +46,8 @@ class TransformersQwenBackend:
         rule: KeepRule | None = None,
     ) -> None:
         """Load the checkpoint; ValueError (one line) when ``model_path`` holds no usable Qwen2-VL model."""
-        path = Path(model_path)
-        if not path.is_dir():
-            raise ValueError(f"transformers backend: model path {path} is not a directory")
+        checkpoint = open_checkpoint(model_path, "Qwen2-VL")
+        path = checkpoint.path
         if batch_size < 1:
             raise ValueError("transformers backend needs batch_size ≥ 1")
         try:
@@ -73,7 +73,7 @@ class TransformersQwenBackend:
         self._prompt = self._tokenizer.apply_chat_template(messages, add_generation_prompt=True, tokenize=False)
         if self._prompt.count(self._image_token) != 1:
             raise ValueError(f"the chat template of {path} does not place one {self._image_token} per image")
-        self.model_id = f"{model.config.model_type}:{path.name}"
+        self.model_id = checkpoint.model_id(checkpoint.model_type)
 
     def classify(self, images: Sequence[np.ndarray]) -> list[Verdict]:
         """One Verdict per RGB uint8 HxWx3 image; a failed batch fails only its own frames."""

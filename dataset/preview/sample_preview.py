@@ -14,11 +14,11 @@ from typing import Any
 import numpy as np
 
 from dataset.media import MediaStore
+from dataset.preview import images
+from dataset.preview.cache import RenderCache
+from dataset.preview.cloud import VirtualCamera, disparity_cloud
+from dataset.preview.scene import SCENE_VERSION, export_scene
 from dataset.samples import load_output
-from webapp.preview import images
-from webapp.preview.cache import RenderCache
-from webapp.preview.cloud import VirtualCamera, disparity_cloud
-from webapp.preview.scene import SCENE_VERSION, export_scene
 
 # Bump when a render changes, so cached PNGs are rebuilt.
 RENDER_VERSION = 1

@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 from pycocotools import mask as coco_mask
 
-from annotation.segment.base import SegmentError
+from dataset.formats.errors import FormatError
 
 MAX_PIXELS = 1 << 28  # refuse to allocate more for one decoded mask (16k x 16k)
 
@@ -17,7 +17,7 @@ def mask_to_rle(mask: np.ndarray) -> dict[str, Any]:
     as pycocotools writes them)."""
     mask = np.asarray(mask)
     if mask.ndim != 2:
-        raise SegmentError(f"mask must be 2-D (H, W), got shape {mask.shape}")
+        raise FormatError(f"mask must be 2-D (H, W), got shape {mask.shape}")
     rle = coco_mask.encode(np.asfortranarray(mask.astype(np.uint8, copy=False)))
     return {"size": [int(rle["size"][0]), int(rle["size"][1])], "counts": rle["counts"].decode("ascii")}
 
@@ -25,31 +25,31 @@ def mask_to_rle(mask: np.ndarray) -> dict[str, Any]:
 def rle_to_mask(rle: dict[str, Any]) -> np.ndarray:
     """Decode a COCO RLE (compressed string or uncompressed list counts) to bool (H, W).
 
-    Raises SegmentError on malformed input; the runs are checked before pycocotools sees them
+    Raises FormatError on malformed input; the runs are checked before pycocotools sees them
     because its decoder trusts them (wrong totals would write out of bounds).
     """
     try:
         h, w = (int(v) for v in rle["size"])
         counts = rle["counts"]
     except (KeyError, TypeError, ValueError) as exc:
-        raise SegmentError(f"RLE needs 'size': [h, w] and 'counts': {exc}") from exc
+        raise FormatError(f"RLE needs 'size': [h, w] and 'counts': {exc}") from exc
     if not (h >= 0 and w >= 0 and h * w <= MAX_PIXELS):
-        raise SegmentError(f"RLE size must be non-negative and at most {MAX_PIXELS} pixels, got {[h, w]}")
+        raise FormatError(f"RLE size must be non-negative and at most {MAX_PIXELS} pixels, got {[h, w]}")
     if isinstance(counts, list):
         runs = counts
         if not all(isinstance(r, int) and not isinstance(r, bool) for r in runs):
-            raise SegmentError("uncompressed RLE counts must be integers")
+            raise FormatError("uncompressed RLE counts must be integers")
         coded = coco_mask.frPyObjects({"size": [h, w], "counts": runs}, h, w) if _valid(runs, h * w) else None
     elif isinstance(counts, (str, bytes)):
         try:
             text = counts.encode("ascii") if isinstance(counts, str) else counts
         except UnicodeEncodeError as exc:
-            raise SegmentError(f"RLE counts must be ASCII: {exc}") from exc
+            raise FormatError(f"RLE counts must be ASCII: {exc}") from exc
         coded = {"size": [h, w], "counts": text} if _valid(_parse(text), h * w) else None
     else:
-        raise SegmentError(f"RLE counts must be a string or a list, got {type(counts).__name__}")
+        raise FormatError(f"RLE counts must be a string or a list, got {type(counts).__name__}")
     if coded is None:
-        raise SegmentError(f"RLE runs do not add up to {h}x{w} pixels")
+        raise FormatError(f"RLE runs do not add up to {h}x{w} pixels")
     if h * w == 0:
         return np.zeros((h, w), bool)
     return coco_mask.decode(coded).astype(bool)
@@ -69,7 +69,7 @@ def _parse(text: bytes) -> list[int]:
     for char in text:
         c = char - 48
         if not 0 <= c < 64:
-            raise SegmentError(f"RLE counts has a character outside '0'..'o': {chr(char)!r}")
+            raise FormatError(f"RLE counts has a character outside '0'..'o': {chr(char)!r}")
         value |= (c & 0x1F) << shift
         shift += 5
         if c & 0x20:
@@ -81,5 +81,5 @@ def _parse(text: bytes) -> list[int]:
         runs.append(value)
         value = shift = 0
     if shift:
-        raise SegmentError("RLE counts string ends inside a number")
+        raise FormatError("RLE counts string ends inside a number")
     return runs

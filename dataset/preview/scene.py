@@ -12,7 +12,7 @@ import math
 import threading
 from collections.abc import Iterator, Mapping
 
-from webapp.preview.cloud import PointCloud, VirtualCamera
+from dataset.preview.cloud import PointCloud, VirtualCamera
 
 # Bump when the scene's content changes, so cached recordings are rebuilt.
 SCENE_VERSION = 1

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from pycocotools import mask as coco_mask
 
-from annotation.segment import SegmentError, mask_to_rle, rle_to_mask
+from dataset.formats import FormatError, mask_to_rle, rle_to_mask
 
 # pycocotools 2.0.11 calls np.array(copy=False) on an object without __array__(copy=...)
 
@@ -64,11 +64,11 @@ def test_empty_and_degenerate_sizes() -> None:
     {"size": [1 << 20, 1 << 20], "counts": [1 << 40]},
     "not a dict",
 ])
-def test_malformed_rle_raises_segment_error(bad) -> None:
-    with pytest.raises(SegmentError):
+def test_malformed_rle_raises_format_error(bad) -> None:
+    with pytest.raises(FormatError):
         rle_to_mask(bad)
 
 
 def test_mask_must_be_two_dimensional() -> None:
-    with pytest.raises(SegmentError):
+    with pytest.raises(FormatError):
         mask_to_rle(np.zeros((2, 2, 2), bool))
