@@ -13,13 +13,12 @@ from typing import Any
 
 import numpy as np
 
-from dataset.readers import StereoSample, resize_sample
-from model.methods import Predict, SampleError
-from model.metrics import depth_metrics, disparity_metrics
+from dataset.readers import SampleError, StereoSample, resize_sample
+from model.methods import Predict
+from model.metrics import bad_key, depth_metrics, disparity_metrics, reporting_form
 
 RESOLUTIONS = {"full": 1.0, "half": 0.5, "quarter": 0.25}
 DEFAULT_THRESHOLDS: tuple[float, ...] = (1, 2, 3, 5)
-PERCENT_KEYS = ("delta1", "delta2", "delta3")  # fractions from model.metrics, reported in percent
 
 
 @dataclass(frozen=True)
@@ -48,13 +47,9 @@ class _Pool:
         if self.count == 0:
             return {"epe": math.nan, "pixels": 0}
         out = {"epe": self.abs_err / self.count}
-        out.update({_bad_key(t): 100.0 * n / self.count for t, n in self.bad.items()})
+        out.update({bad_key(t): 100.0 * n / self.count for t, n in self.bad.items()})
         out["pixels"] = self.count
         return out
-
-
-def _bad_key(threshold: float) -> str:
-    return f"bad{threshold:g}".replace(".", "_")
 
 
 def sample_metrics(pred: np.ndarray, sample: StereoSample, options: EvalOptions) -> dict[str, dict[str, float]]:
@@ -70,10 +65,10 @@ def sample_metrics(pred: np.ndarray, sample: StereoSample, options: EvalOptions)
     for region, mask in _regions(sample, options):
         where = mask & finite
         figures = disparity_metrics(pred, gt, where, thresholds=options.thresholds)
-        if sample.camera is not None:
-            depth = depth_metrics(pred, gt, where, sample.camera.fx, sample.camera.baseline,
-                                  options.depth_range or getattr(sample.camera, "depth_range", None))
-            figures.update({k: 100.0 * v if k in PERCENT_KEYS else v for k, v in depth.items()})
+        camera = sample.camera
+        if camera is not None:
+            figures.update(reporting_form(depth_metrics(pred, gt, where, camera.fx, camera.baseline,
+                                                        options.depth_range or camera.depth_range, doffs=camera.doffs)))
         out[region] = figures
     return out
 
@@ -166,5 +161,5 @@ def iter_reader(reader: Any) -> Iterable[StereoSample | _Unreadable]:
     for i in range(len(reader)):
         try:
             yield reader[i]
-        except (OSError, ValueError) as exc:
+        except SampleError as exc:
             yield _Unreadable(reader.names[i], str(exc))

@@ -129,7 +129,7 @@ def _pictures(out: Path, reader: Any, report: dict[str, Any], writer: Prediction
             sample = reader[index[name]]
             factor = RESOLUTIONS[report["resolution"]]
             sample = sample if factor == 1.0 else resize_sample(sample, factor)
-            rel = Path(str(sample.meta.get("left_rel") or sample.name)).with_suffix(".pfm")
+            rel = Path(str(sample.meta.get("left") or sample.name)).with_suffix(".pfm")
             preds = {m: read_pfm(writer.out_dir / "predictions" / m / rel) for m in methods
                      if (writer.out_dir / "predictions" / m / rel).is_file()}
             pictures[f"{label}: {name}"] = write_pictures(out, sample, preds)

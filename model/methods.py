@@ -12,20 +12,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
 from dataset.formats import read_pfm
 from dataset.geometry.consistency import sgbm_disparity
-from dataset.readers import StereoSample
+from dataset.readers import SampleError, StereoSample
+from dataset.readers.base import resize_disparity, resize_image
 from model.align import AlignRule, align
 
 METHODS = ("fusion", "stereo", "mono_align", "mono_gt_align", "sgbm", "predictions")
 NETWORK_METHODS = ("fusion", "stereo", "mono_align")
-
-
-class SampleError(ValueError):
-    """This sample cannot be predicted by this method (the evaluation reports it and goes on)."""
 
 
 def method_key(name: str) -> str:
@@ -36,24 +32,10 @@ def method_key(name: str) -> str:
     return key
 
 
-def resize_disparity(disparity: np.ndarray, height: int, width: int) -> np.ndarray:
-    """A disparity map of any size at ``height`` x ``width``, its values scaled by the width ratio
-    (disparity is a horizontal length in pixels). NaN stays NaN (nearest resampling of validity)."""
-    h, w = disparity.shape
-    if (h, w) == (height, width):
-        return disparity.astype(np.float32, copy=False)
-    valid = np.isfinite(disparity)
-    filled = np.where(valid, disparity, 0).astype(np.float32)
-    out = cv2.resize(filled, (width, height), interpolation=cv2.INTER_LINEAR) * np.float32(width / w)
-    keep = cv2.resize(valid.astype(np.uint8), (width, height), interpolation=cv2.INTER_NEAREST).astype(bool)
-    return np.where(keep, out, np.nan).astype(np.float32)
-
-
 def resize_relative(mono: np.ndarray, height: int, width: int) -> np.ndarray:
     """A relative (affine-invariant) disparity at another size: values are kept, not scaled."""
-    if mono.shape == (height, width):
-        return mono.astype(np.float32, copy=False)
-    return cv2.resize(np.nan_to_num(mono.astype(np.float32)), (width, height), interpolation=cv2.INTER_LINEAR)
+    mono = np.nan_to_num(np.asarray(mono, np.float32))
+    return mono if mono.shape == (height, width) else resize_image(mono, (height, width))
 
 
 def fill_holes(disparity: np.ndarray) -> np.ndarray:
@@ -109,7 +91,7 @@ class Mono:
 
 def prediction_path(directory: Path, sample: StereoSample) -> Path:
     """``DIR/REL/x.pfm`` for the sample whose left image is ``REL/x.png`` in its dataset."""
-    rel = Path(str(sample.meta.get("left_rel") or sample.name))
+    rel = Path(str(sample.meta.get("left") or sample.name))
     if rel.is_absolute() or ".." in rel.parts:
         raise SampleError(f"sample path {rel} is not relative to the dataset")
     return directory / rel.with_suffix(".pfm")
@@ -202,4 +184,4 @@ def _read_prediction(directory: Path, sample: StereoSample) -> np.ndarray:
     if disparity.ndim != 2:
         raise SampleError(f"{path}: expected a single-channel disparity, got shape {disparity.shape}")
     h, w = sample.disparity.shape
-    return resize_disparity(disparity, h, w)
+    return resize_disparity(disparity, (h, w))

@@ -34,7 +34,7 @@ class PredictionWriter:
         self.out_dir, self.kitti_png = out_dir, kitti_png
 
     def __call__(self, method: str, sample: StereoSample, pred: np.ndarray) -> None:
-        rel = Path(str(sample.meta.get("left_rel") or sample.name)).with_suffix(".pfm")
+        rel = Path(str(sample.meta.get("left") or sample.name)).with_suffix(".pfm")
         path = self.out_dir / "predictions" / method / rel
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_bytes(path, encode_pfm(np.asarray(pred, np.float32)))
