@@ -81,6 +81,13 @@ def depth_metrics(pred_disp: Array, gt_disp: Array, mask: Array, fx: float, base
             **{f"delta{k}": _mean(ratio < 1.25**k) for k in (1, 2, 3)}}
 
 
+def counted_pixels(gt: Array, mask: Array) -> int:
+    """How many pixels the disparity metrics count (mask ∧ finite gt): the weight that turns
+    per-image EPE and bad-x into pixel-pooled figures (Σ metricᵢ·nᵢ / Σ nᵢ)."""
+    _, _, region = _prepared(gt, gt, mask)
+    return int(region.sum())
+
+
 def bad_key(threshold: float) -> str:
     """The report key of a bad-x threshold: ``bad2`` for 2, ``bad0_5`` for 0.5."""
     return "bad" + f"{threshold:g}".replace(".", "_")

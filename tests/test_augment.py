@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 import pytest
 
@@ -69,21 +70,29 @@ def test_disparity_scales_with_the_image(log2_scale: float) -> None:
     assert s == pytest.approx(2**log2_scale)
     y0, x0 = out.meta["augment"]["crop_origin"]
     # the ramp d(x) = 4 + x/4 becomes s·d(x/s) = 4s + x/4 at scaled column x (pixel centres)
-    w = round(64 * s)
-    ratio = w / 64
     cols = x0 + np.arange(32)
-    src = (cols + 0.5) / ratio - 0.5
-    expected = ratio * (4.0 + 0.25 * src)
+    src = (cols + 0.5) / s - 0.5
+    expected = s * (4.0 + 0.25 * src)
     valid = out.regions["all"][-1]
     inner = valid & (src > 1) & (src < 62)
     assert np.allclose(out.disparity[-1][inner], expected[inner], atol=0.05)
-    assert out.camera.fx == pytest.approx(100.0 * ratio)
+    assert out.camera.fx == pytest.approx(100.0 * s)
 
 
 def test_nan_stays_invalid_after_resizing() -> None:
     sample = pair()
     out = augment_pair(sample, (48, 76), Cfg(scale=(0.25, 0.25), color_jitter=False), np.random.default_rng(0))
     y0, x0 = out.meta["augment"]["crop_origin"]
-    assert y0 == 0 and x0 == 0  # the scaled pair is 48×76: one place to crop
+    assert y0 == 0 and x0 == 0  # the scaled pair is 47×76: one place to crop
     hole = ~out.regions["all"]
     assert hole[:5, :7].all() and not hole[8:].any() and not hole[:, 10:].any()
+
+
+def test_the_source_window_gives_the_pixels_of_warping_the_whole_pair() -> None:
+    sample = pair(40, 64)
+    for seed in range(4):
+        out = augment_pair(sample, (16, 24), Cfg(color_jitter=False), np.random.default_rng(seed))
+        s, (y0, x0) = out.meta["augment"]["scale"], out.meta["augment"]["crop_origin"]
+        whole = np.array([[1 / s, 0, (x0 + 0.5) / s - 0.5], [0, 1 / s, (y0 + 0.5) / s - 0.5]])
+        reference = cv2.warpAffine(sample.left, whole, (24, 16), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)
+        assert np.array_equal(out.left, reference)

@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import warnings
-from pathlib import Path
-
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -15,7 +12,6 @@ from dataset.geometry import (
     InputError,
     ScaleSearchError,
     forward_warp,
-    inpaint_holes,
     search_disparity_scale,
     synthesize_right_view,
 )
@@ -205,7 +201,7 @@ def test_scale_search_is_used_without_scale() -> None:
         (np.zeros((4, 5, 3), np.uint8), np.full((4, 5), np.nan), {}, InputError, "no finite value"),
         (np.zeros((4, 5, 3), np.uint8), np.ones((4, 5)), {"scale": -1.0}, InputError, "scale"),
         (np.zeros((4, 5, 3), np.uint8), np.ones((4, 5)), {"inpaint": "magic"}, InpaintError, "unknown inpainting"),
-        (np.zeros((4, 5, 3), np.uint8), np.ones((4, 5)), {"inpaint": "lama"}, InpaintError, "model path"),
+        (np.zeros((4, 5, 3), np.uint8), np.ones((4, 5)), {"inpaint": "lama"}, InpaintError, "LaMa is a model"),
     ],
 )
 def test_bad_input_is_rejected(
@@ -213,55 +209,6 @@ def test_bad_input_is_rejected(
 ) -> None:
     with pytest.raises(error, match=message):
         synthesize_right_view(left, disparity, **kwargs)
-
-
-# --- LaMa through a real TorchScript file ---------------------------------------------------
-
-
-@pytest.fixture(scope="module")
-def mean_fill_model(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A TorchScript stand-in for big-lama.pt: fills masked pixels with the unmasked mean."""
-    torch = pytest.importorskip("torch")
-
-    class MeanFill(torch.nn.Module):
-        def forward(self, image: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-            assert image.shape[2] % 8 == 0 and image.shape[3] % 8 == 0
-            known = 1.0 - mask
-            mean = (image * known).sum(dim=(2, 3), keepdim=True) / known.sum(dim=(2, 3), keepdim=True)
-            return image * known + mean * mask
-
-    path = tmp_path_factory.mktemp("lama") / "big-lama.pt"
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", DeprecationWarning)  # TorchScript is what big-lama.pt is
-        torch.jit.script(MeanFill()).save(str(path))
-    return path
-
-
-def test_lama_backend_runs_a_torchscript_model(mean_fill_model: Path) -> None:
-    image = np.zeros((13, 21, 3), dtype=np.uint8)  # not multiples of 8: padded and cropped
-    image[..., 0] = 100
-    image[..., 2] = 40
-    holes = np.zeros((13, 21), dtype=bool)
-    holes[4:9, 5:12] = True
-    image[holes] = 0
-    filled = inpaint_holes(image, holes, "lama", lama_model=mean_fill_model)
-    np.testing.assert_array_equal(filled[~holes], image[~holes])
-    # The mean over the padded frame (reflect padding repeats known pixels) is the colour.
-    np.testing.assert_array_equal(filled[holes], np.tile([100, 0, 40], (int(holes.sum()), 1)))
-
-
-def test_lama_right_view_and_bad_model_file(mean_fill_model: Path, tmp_path: Path) -> None:
-    left = np.full((16, 40, 3), 77, dtype=np.uint8)
-    disparity = np.full((16, 40), 3.0)
-    result = synthesize_right_view(left, disparity, scale=1.0, inpaint="lama", lama_model=mean_fill_model)
-    assert result.holes[:, -3:].all()
-    assert (result.image == 77).all()
-    junk = tmp_path / "junk.pt"
-    junk.write_bytes(b"not a model")
-    with pytest.raises(InpaintError, match="not a TorchScript model"):
-        synthesize_right_view(left, disparity, scale=1.0, inpaint="lama", lama_model=junk)
-    with pytest.raises(InpaintError, match="does not exist"):
-        synthesize_right_view(left, disparity, scale=1.0, inpaint="lama", lama_model=tmp_path / "none.pt")
 
 
 # --- accuracy on the synthetic illusion scenes (dataset.synthetic) -----------------------

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from model.metrics import bad, bad_key, d1, depth_metrics, disparity_metrics, epe, reporting_form
+from model.metrics import bad, bad_key, counted_pixels, d1, depth_metrics, disparity_metrics, epe, reporting_form
 
 # 2×3 disparities: errors 0, 1, 2.5, 4, NaN-gt (ignored), 0.5
 GT = np.array([[10.0, 20.0, 30.0], [40.0, np.nan, 50.0]], np.float32)
@@ -22,6 +22,11 @@ def test_epe_and_bad_by_hand() -> None:
     assert bad(PRED, GT, ALL, 3) == pytest.approx(1 / 5)
     region = np.array([[True, True, False], [False, False, False]])
     assert epe(PRED, GT, region) == pytest.approx(0.5)
+    # pooling per-image figures by their pixel counts gives the figure over all pixels
+    rest = ALL & ~region
+    assert (counted_pixels(GT, region), counted_pixels(GT, rest)) == (2, 3)
+    pooled = (epe(PRED, GT, region) * 2 + epe(PRED, GT, rest) * 3) / 5
+    assert pooled == pytest.approx(epe(PRED, GT, ALL))
 
 
 def test_disparity_metrics_reporting_form_in_percent() -> None:
@@ -106,5 +111,6 @@ def test_numpy_and_torch_agree() -> None:
         assert a == pytest.approx(b, rel=1e-12)
     # mixed inputs: the numpy mask follows the tensors
     assert epe(as_torch[0], as_torch[1], mask) == pytest.approx(epe(pred, gt, mask), rel=1e-12)
+    assert counted_pixels(as_torch[1], as_torch[2]) == counted_pixels(gt, mask)
     empty = torch.zeros(gt.shape, dtype=torch.bool)
     assert math.isnan(epe(as_torch[0], as_torch[1], empty))

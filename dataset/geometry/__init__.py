@@ -13,7 +13,7 @@ from dataset.geometry.errors import (
     ScaleSearchError,
 )
 from dataset.geometry.filters import guided_filter
-from dataset.geometry.inpaint import INPAINT_METHODS, InpaintMethod, inpaint_holes
+from dataset.geometry.inpaint import INPAINT_METHODS, HoleFiller, InpaintMethod, inpaint_holes
 from dataset.geometry.plane import PlaneFit, fit_plane_ransac
 from dataset.geometry.rectify import (
     MaskPair,
@@ -33,6 +33,7 @@ __all__ = [
     "Consistency",
     "DegenerateSupportError",
     "GeometryError",
+    "HoleFiller",
     "InpaintError",
     "InpaintMethod",
     "InputError",

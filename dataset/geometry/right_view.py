@@ -8,13 +8,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from dataset.geometry import checks
 from dataset.geometry.errors import InputError, ScaleSearchError
-from dataset.geometry.inpaint import InpaintMethod, check_method, inpaint_holes
+from dataset.geometry.inpaint import HoleFiller, InpaintMethod, check_method, inpaint_holes
 
 # Algorithm 2 searches s in (0, W / (4·max d)]: scaled disparities stay under a quarter width.
 MAX_DISPARITY_FRACTION = 0.25
@@ -41,25 +40,24 @@ def synthesize_right_view(
     *,
     scale: float | None = None,
     tau: float = 0.9,
-    inpaint: InpaintMethod = "telea",
-    lama_model: str | Path | None = None,
+    inpaint: InpaintMethod | HoleFiller = "telea",
 ) -> RightView:
     """Warp ``left`` (uint8 HxW or HxWx3) to the right view with ``disparity`` (HxW, ≥ 0 expected).
 
     With ``scale=None`` the scale s is the largest one keeping a fraction ``tau`` of the pixels
     inside the image (:func:`search_disparity_scale`); otherwise ``scale`` (> 0) is used as is
     (e.g. 1.0 for a true disparity in pixels). Holes are filled by ``inpaint`` (see
-    :func:`inpaint_holes`; ``lama_model`` is the TorchScript path for ``"lama"``).
+    :func:`inpaint_holes`: an OpenCV method name, ``"none"``, or a model's hole filler).
     NaN/inf disparities are not warped.
     """
     # Every input is checked before the scale search, so each problem is named first.
     disp = checks.float_map(disparity, "disparity")
     checks.image(left, "left image", disp.shape)
-    check_method(inpaint, lama_model)
+    check_method(inpaint)
     if scale is None:
         scale = search_disparity_scale(disp, tau)
     warped, holes, valid_ratio = forward_warp(left, disp, scale)
-    image = inpaint_holes(warped, holes, inpaint, lama_model=lama_model)
+    image = inpaint_holes(warped, holes, inpaint)
     return RightView(image=image, holes=holes, scale=float(scale), valid_ratio=valid_ratio)
 
 

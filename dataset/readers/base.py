@@ -144,22 +144,36 @@ def not_layout(root: Path, fmt: str, expected: str) -> LayoutError:
     return LayoutError(f"{root}: not a {fmt} dataset; expected {expected}")
 
 
-def resize_disparity(disparity: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """Disparity (float32 H×W, NaN = invalid) resized to ``size`` = (height, width), values × the
-    width ratio. Interpolation is normalised by the valid neighbours (invalid pixels never blend
-    in as zeros), and a pixel is valid iff its nearest source pixel is (NaN stays invalid)."""
-    height, width = size
+def resample_disparity(disparity: np.ndarray, resample: Callable[[np.ndarray, int], np.ndarray],
+                       factor: float) -> np.ndarray:
+    """Disparity (float32, NaN = invalid) through ``resample(array, cv2 interpolation)`` (a resize
+    or a warp), values × ``factor``. Interpolation is normalised by the valid neighbours (invalid
+    pixels never blend in as zeros), and a pixel is valid iff its nearest source pixel is, so NaN
+    stays invalid and no new holes open."""
     disp = np.asarray(disparity, np.float32)
     valid = np.isfinite(disp)
-    if (height, width) == disp.shape:
-        return disp.copy()
-    interpolation = cv2.INTER_AREA if width < disp.shape[1] else cv2.INTER_LINEAR
-    weight = cv2.resize(valid.astype(np.float32), (width, height), interpolation=interpolation)
-    total = cv2.resize(np.where(valid, disp, 0).astype(np.float32), (width, height), interpolation=interpolation)
-    keep = resize_mask(valid, size) & (weight > 0)
-    out = np.full((height, width), np.nan, np.float32)
-    out[keep] = total[keep] / weight[keep] * np.float32(width / disp.shape[1])
+    weight = resample(valid.astype(np.float32), cv2.INTER_LINEAR)
+    total = resample(np.where(valid, disp, 0).astype(np.float32), cv2.INTER_LINEAR)
+    keep = resample(valid.astype(np.uint8), cv2.INTER_NEAREST).astype(bool) & (weight > 1e-6)
+    out = np.full(weight.shape, np.nan, np.float32)
+    out[keep] = total[keep] / weight[keep] * np.float32(factor)
     return out
+
+
+def resize_disparity(disparity: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """Disparity (float32 H×W, NaN = invalid) resized to ``size`` = (height, width), values × the
+    width ratio (:func:`resample_disparity`; area-averaged when shrinking)."""
+    height, width = size
+    shrink = width < disparity.shape[1]
+
+    def resize(array: np.ndarray, interpolation: int) -> np.ndarray:
+        if shrink and interpolation == cv2.INTER_LINEAR:
+            interpolation = cv2.INTER_AREA
+        return cv2.resize(array, (width, height), interpolation=interpolation)
+
+    if (height, width) == disparity.shape:
+        return np.asarray(disparity, np.float32).copy()
+    return resample_disparity(disparity, resize, width / disparity.shape[1])
 
 
 def resize_mask(mask: np.ndarray, size: tuple[int, int]) -> np.ndarray:

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 from sqlalchemy import select
 
+from annotation.inpaint import InpainterError
 from dataset.db import transaction
 from dataset.formats import rle_to_mask
 from dataset.geometry import (
@@ -33,6 +34,7 @@ from dataset.models import Annotation, Frame, FrameState, RegionKind, Sample, Sa
 from dataset.samples import load_output, mask_name, store_outputs
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.frames import update_frame
+from dataset.services.inpaint import hole_filler
 from dataset.services.jobs import JobContext
 from dataset.version import code_version
 
@@ -124,8 +126,8 @@ def generate_job(ctx: JobContext) -> dict[str, Any]:
                                  seed=frame.id)
         ctx.progress(0.5, "synthesizing the right view")
         view = synthesize_right_view(left, rect.disparity, scale=mono.scale, tau=settings.right_view_tau,
-                                     inpaint=settings.inpaint_backend, lama_model=settings.lama_model_path)
-    except GeometryError as exc:
+                                     inpaint=hole_filler(settings.inpaint_backend, settings.lama_model_path))
+    except (GeometryError, InpainterError) as exc:
         raise GenerationError(f"frame {frame.id}: {exc}") from None
     disparity = (view.scale * rect.disparity).astype(np.float32)
     ctx.progress(0.7, "quality checks")

@@ -31,7 +31,7 @@ def geometry_benchmark(as_json: bool, repeats: int) -> None:
 @click.option("--concurrency", type=click.IntRange(min=1, max=256), default=16, show_default=True)
 def prefilter_benchmark(as_json: bool, frames: int, concurrency: int) -> None:
     """Frames per second the openai backend's client sustains against an instant local server."""
-    from annotation.vlm.benchmark import run_prefilter_bench
+    from webapp.benchmarks.prefilter import run_prefilter_bench
 
     _report(run_prefilter_bench(frames=frames, concurrency=concurrency), as_json)
 

@@ -14,6 +14,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from annotation.inpaint import InpainterError
 from dataset.formats import (
     FormatError,
     read_image,
@@ -25,7 +26,6 @@ from dataset.formats import (
     write_rgb,
 )
 from dataset.geometry import (
-    INPAINT_METHODS,
     GeometryError,
     InputError,
     RegionMasks,
@@ -35,6 +35,7 @@ from dataset.geometry import (
     reproject_depth,
     synthesize_right_view,
 )
+from dataset.services.inpaint import HOLE_FILLERS, hole_filler
 from webapp.cli.state import CliState
 
 _FILE = click.Path(exists=True, dir_okay=False, path_type=Path)
@@ -58,7 +59,7 @@ def geometry() -> None:
 @click.option("--tau", type=float, default=0.9, show_default=True, help="Fraction of pixels to keep in view.")
 @click.option(
     "--inpaint",
-    type=click.Choice(INPAINT_METHODS),
+    type=click.Choice(HOLE_FILLERS),
     default=None,
     help="Hole filling; default: the data dir's inpaint_backend, else telea.",
 )
@@ -77,9 +78,8 @@ def right_view(
     """Synthesize the right view of LEFT from its DISPARITY (Algorithm 2)."""
     method, model = _inpaint_config(inpaint, lama_model)
     with _reported():
-        result = synthesize_right_view(
-            read_rgb(left), read_map(disparity), scale=scale, tau=tau, inpaint=method, lama_model=model  # type: ignore[arg-type]
-        )
+        result = synthesize_right_view(read_rgb(left), read_map(disparity), scale=scale, tau=tau,
+                                       inpaint=hole_filler(method, model))
         write_rgb(out, result.image)
         if holes is not None:
             write_mask(holes, result.holes)
@@ -201,7 +201,7 @@ def _reported() -> Iterator[None]:
     """Bad input becomes a one-line ``Error: …`` (exit 1) instead of a traceback."""
     try:
         yield
-    except (GeometryError, FormatError, OSError) as exc:
+    except (GeometryError, InpainterError, FormatError, OSError) as exc:
         raise click.ClickException(str(exc)) from None
 
 
