@@ -293,6 +293,78 @@ class Job(Base):
     created_by: Mapped[User | None] = relationship()
 
 
+class RunState(enum.StrEnum):
+    """A training run's state; ``diverged`` and ``cancelled`` are the run's own endings."""
+
+    queued = "queued"
+    running = "running"
+    succeeded = "succeeded"
+    failed = "failed"
+    diverged = "diverged"  # NaN/inf loss; the last good checkpoint stays
+    cancelled = "cancelled"
+    interrupted = "interrupted"  # its worker died; resume it
+
+    @property
+    def finished(self) -> bool:
+        return self not in (RunState.queued, RunState.running)
+
+
+class TrainingRun(Base):
+    """One training of the fusion model: what it trains on (a pinned dataset version), how, and how far it got.
+
+    The run directory ``<home>/runs/<id>/`` holds ``run.json`` (the engine's input) and what the
+    engine writes; the row mirrors the engine's ``progress.jsonl`` for the pages.
+    """
+
+    __tablename__ = "training_runs"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    state: Mapped[RunState] = mapped_column(_enum(RunState), default=RunState.queued, index=True)
+    preset: Mapped[str] = mapped_column(String(32))
+    config: Mapped[dict[str, Any]] = mapped_column(default=dict, doc="The engine's Config.to_dict().")
+    launch: Mapped[dict[str, Any]] = mapped_column(
+        default=dict, doc="How it was asked for: data selection, split fractions, seed, processes, devices, init.")
+    dataset_id: Mapped[str] = mapped_column(String(64), default="", doc="SHA-256 of the pinned version's items.")
+    dataset: Mapped[dict[str, Any]] = mapped_column(default=dict, doc="The pinned dataset version.")
+    splits: Mapped[dict[str, Any]] = mapped_column(default=dict, doc="split name → sample ids (or names).")
+    job_id: Mapped[int | None] = mapped_column(ForeignKey("jobs.id", ondelete="SET NULL"))
+    created_by_id: Mapped[int | None] = mapped_column(ForeignKey("users.id", ondelete="SET NULL"))
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    started_at: Mapped[datetime | None]
+    finished_at: Mapped[datetime | None]
+    cancel_requested: Mapped[bool] = mapped_column(default=False, doc="Set by cancel; the job stops the trainers.")
+    step: Mapped[int] = mapped_column(default=0)
+    steps: Mapped[int] = mapped_column(default=0)
+    world_size: Mapped[int | None]
+    resumed_from_step: Mapped[int | None]
+    loss: Mapped[float | None]
+    lr: Mapped[float | None]
+    samples_per_s: Mapped[float | None]
+    eta_s: Mapped[float | None]
+    best_val_epe: Mapped[float | None]
+    best_step: Mapped[int | None]
+    last_val: Mapped[dict[str, Any]] = mapped_column(default=dict, doc="The newest validation event.")
+    last_checkpoint: Mapped[str | None] = mapped_column(Text, doc="Relative to the run directory.")
+    progress_offset: Mapped[int] = mapped_column(default=0, doc="Bytes of progress.jsonl already mirrored.")
+    reason: Mapped[str | None] = mapped_column(Text, doc="Why it failed, diverged or was cancelled.")
+
+    job: Mapped[Job | None] = relationship()
+    created_by: Mapped[User | None] = relationship()
+
+
+class TrainingMetric(Base):
+    """One point of a run's curves: a training step (loss, lr, …) or a validation (metrics per region)."""
+
+    __tablename__ = "training_metrics"
+    __table_args__ = (UniqueConstraint("run_id", "kind", "step", name="uq_training_metrics_point"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    run_id: Mapped[int] = mapped_column(ForeignKey("training_runs.id", ondelete="CASCADE"))
+    kind: Mapped[str] = mapped_column(String(16), doc="step or val")
+    step: Mapped[int]
+    values: Mapped[dict[str, Any]] = mapped_column(default=dict)
+
+
 class AuditEntry(Base):
     """Every human decision: who, what, on which object, when."""
 

@@ -98,6 +98,16 @@ class Settings(BaseSettings):
     def cache_dir(self) -> Path:
         return self.home / "cache"
 
+    @property
+    def runs_dir(self) -> Path:
+        """Training runs, one directory per run id."""
+        return self.home / "runs"
+
+    @property
+    def models_dir(self) -> Path:
+        """The current model's pointer (``current.json``)."""
+        return self.home / "models"
+
 
 def load_settings(
     data_dir: Path | str | None = None,

@@ -12,10 +12,11 @@ from sqlalchemy.orm import Session
 
 from dataset.formats import mask_to_rle
 from dataset.media import MediaStore
-from dataset.models import Frame, FrameState, User, Video
+from dataset.models import Frame, FrameState, Sample, SampleState, User, Video
 from dataset.samples import load_output
 from dataset.services.annotate import save_annotation
 from dataset.services.review import review_frame
+from dataset.services.sample_review import review_sample
 
 APPROVE_PER_VIDEO = 6
 ANNOTATE_PER_VIDEO = 3
@@ -40,6 +41,14 @@ def seed_reviews_and_annotations(session: Session, media: MediaStore, curator: U
                                 illusion_type=video.meta["pairs"][0]["illusion_type"], submit=True)
                 annotated.append(frame.id)
     return annotated
+
+
+def accept_generated_samples(session: Session, curator: User) -> int:
+    """Accept every generated sample (they come from true masks), so the demo has a dataset to train on."""
+    ids = session.scalars(select(Sample.id).where(Sample.state == SampleState.generated).order_by(Sample.id)).all()
+    for sample_id in ids:
+        review_sample(session, sample_id, curator, "accept")
+    return len(ids)
 
 
 def _true_regions(media: MediaStore, frame: Frame) -> list[dict[str, object]]:

@@ -4,19 +4,21 @@ from __future__ import annotations
 
 from typing import Any
 
-from flask import g, request
+from flask import abort, g, request
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
 from sqlalchemy import select
 
 from dataset.models import Job, JobState, Role, User
 from dataset.services import jobs as job_service
+from dataset.services import training
 from dataset.services import users as user_service
 from dataset.services.errors import InvalidInput, NotFound
 from dataset.services.frames import funnel_counts, list_frames, parse_state
 from webapp.api.blueprint import api, int_arg, json_body
 from webapp.api.openapi import openapi_document
 from webapp.auth import requires
+from webapp.jobs import runs as run_control
 from webapp.runtime import runtime
 
 
@@ -97,5 +99,11 @@ def get_job(job_id: int) -> ResponseReturnValue:
 @api.post("/jobs/<int:job_id>/retry")
 @requires(Role.curator)
 def retry_job(job_id: int) -> ResponseReturnValue:
+    run_id = training.run_of_job(g.db, job_id)
+    if run_id is not None:  # a training job is its run's: retrying it is resuming the run (admins only)
+        if not current_user.allows(Role.admin):
+            abort(403, "retrying a training job resumes its run: needs the admin role")
+        run_control.resume(runtime(), run_id, g.db.get(User, current_user.id))
+        return job_service.job_json(job_service.get_job(g.db, job_id)), 202
     job = runtime().queue.retry(job_id)
     return job_service.job_json(job), 202

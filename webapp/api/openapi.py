@@ -48,6 +48,9 @@ _ILLUSION_TYPES = [t.value for t in IllusionType]
 _JOB_ID = {"name": "job_id", "in": "path", "required": True, "schema": {"type": "integer"}}
 _SAMPLE_ID = {"name": "sample_id", "in": "path", "required": True, "schema": {"type": "integer"}}
 _FRAME_ID = {"name": "frame_id", "in": "path", "required": True, "schema": {"type": "integer"}}
+_RUN_ID = {"name": "run_id", "in": "path", "required": True, "schema": {"type": "integer"}}
+_CHECKPOINT = {"name": "name", "in": "path", "required": True, "schema": {"type": "string"},
+               "description": "a file name from the run's checkpoints (best.pt, step_0001000.pt, …)"}
 
 
 def openapi_document() -> dict[str, Any]:
@@ -115,8 +118,29 @@ def openapi_document() -> dict[str, Any]:
             "/jobs": {"get": _op("List jobs (annotators: their own)", "annotator", schema="JobList",
                                  params=[_q("state", "string"), _q("limit", desc="1..500, default 50")])},
             "/jobs/{job_id}": {"get": _op("One job with its log", "annotator", params=[_JOB_ID], schema="Job")},
-            "/jobs/{job_id}/retry": {"post": _op("Retry a failed or interrupted job", "curator",
+            "/jobs/{job_id}/retry": {"post": _op("Retry a failed or interrupted job (a training job: admins, "
+                                                 "and it resumes the run)", "curator",
                                                  params=[_JOB_ID], ok="202", schema="Job")},
+            "/runs": {
+                "get": _op("Training runs, newest first (and the current model)", "curator", schema="RunList",
+                           params=[_q("ids", "string", "comma-separated run ids (the compare page)")]),
+                "post": _op("Launch a training run on the train queue; an empty selection is a 400 with the reason",
+                            "admin", body="RunLaunch", ok="202", schema="Run"),
+            },
+            "/runs/{run_id}": {"get": _op("One run with config, dataset version, splits and checkpoints", "curator",
+                                          params=[_RUN_ID], schema="Run")},
+            "/runs/{run_id}/metrics": {"get": _op("Curve points after step `after` (live charts)", "curator",
+                                                  params=[_RUN_ID, _q("after", desc="training step; default -1: all"),
+                                                          _q("after_val", desc="validation step; default -1: all")],
+                                                  schema="RunMetrics")},
+            "/runs/{run_id}/cancel": {"post": _op("Stop a queued or running run (its whole process group)", "admin",
+                                                  params=[_RUN_ID], ok="202", schema="Run")},
+            "/runs/{run_id}/resume": {"post": _op("Continue an interrupted, failed or cancelled run from its newest "
+                                                  "checkpoint", "admin", params=[_RUN_ID], ok="202", schema="Run")},
+            "/runs/{run_id}/promote": {"post": _op("Make a checkpoint of the run the current model", "admin",
+                                                   params=[_RUN_ID], body="Promote", schema="CurrentModel")},
+            "/runs/{run_id}/checkpoints/{name}": {"get": _op("Download a checkpoint file", "curator",
+                                                             params=[_RUN_ID, _CHECKPOINT])},
         },
         "components": {
             "securitySchemes": {
@@ -203,6 +227,41 @@ def openapi_document() -> dict[str, Any]:
                 "AnnotationSave": {"type": "object", "required": ["version", "regions"], "properties": {
                     "version": {"type": "integer"}, "regions": {"type": "array", "items": _ref("Region")},
                     "illusion_type": {"enum": _ILLUSION_TYPES}, "submit": {"type": "boolean", "default": True}}},
+                "Run": {"type": "object", "properties": {
+                    "run": {"type": "integer"}, "job": {"type": ["integer", "null"]},
+                    "state": {"enum": ["queued", "running", "succeeded", "failed", "diverged", "cancelled",
+                                       "interrupted"]},
+                    "preset": {"type": "string"}, "step": {"type": "integer"}, "steps": {"type": "integer"},
+                    "checkpoint": {"type": ["string", "null"], "description": "the newest step checkpoint (a path)"},
+                    "best_checkpoint": {"type": ["string", "null"]},
+                    "resumed_from_step": {"type": ["integer", "null"], "description": "null for a fresh run"},
+                    "loss": {"type": ["number", "null"]}, "lr": {"type": ["number", "null"]},
+                    "samples_per_s": {"type": ["number", "null"]}, "eta_s": {"type": ["number", "null"]},
+                    "best_val_epe": {"type": ["number", "null"], "description": "pixels"},
+                    "dataset": {"type": "object", "description": "id, samples, kinds (counts), splits (counts)"},
+                    "reason": {"type": ["string", "null"]}, "current": {"type": "boolean"}}},
+                "RunList": {"type": "object", "properties": {"items": {"type": "array", "items": _ref("Run")},
+                                                             "current": {"type": ["object", "null"]}}},
+                "RunLaunch": {"type": "object", "properties": {
+                    "preset": {"enum": ["lite", "paper"]}, "steps": {"type": "integer"}, "batch": {"type": "integer"},
+                    "lr": {"type": "number"}, "crop": {"type": "string", "description": "HxW pixels, e.g. 320x736"},
+                    "iters": {"type": "integer"}, "devices": {"type": "string", "description": "auto, cpu, cuda, cuda:0,1"},
+                    "nproc": {"type": "integer"}, "nnodes": {"type": "integer"}, "rdzv_endpoint": {"type": "string"},
+                    "video_ids": {"type": "array", "items": {"type": "integer"}},
+                    "illusion_types": {"type": "array", "items": {"enum": _ILLUSION_TYPES}},
+                    "kinds": {"type": "array", "items": {"enum": ["synthesized", "capture"]}},
+                    "qa_ok": {"type": "boolean"},
+                    "format": {"type": "string", "description": "database (default) or a reader format"},
+                    "data_root": {"type": "string"}, "split": {"type": "string", "description": "train=0.8,val=0.1,test=0.1"},
+                    "seed": {"type": "integer"}, "init_checkpoint": {"type": "string"}}},
+                "RunMetrics": {"type": "object", "properties": {
+                    "run": {"type": "integer"},
+                    "step": {"type": "array", "items": {"type": "object", "description": "step, loss, lr, samples_per_s"}},
+                    "val": {"type": "array", "items": {"type": "object", "description": "step, metrics, images"}}}},
+                "Promote": {"type": "object", "properties": {"checkpoint": {
+                    "type": "string", "description": "best (default), last, or a file name from the run's checkpoints"}}},
+                "CurrentModel": {"type": "object", "properties": {
+                    "checkpoint": {"type": "string"}, "run": {"type": ["integer", "null"]}, "step": {"type": "integer"}}},
                 "DeleteFrame": {"type": "object", "properties": {"reason": {"enum": ["redundant", "imperceptible"]}}},
                 "Propagate": {"type": "object", "required": ["pair", "kind", "mask"], "properties": {
                     "pair": {"type": "integer"}, "kind": {"enum": ["illusion", "support"]}, "mask": _ref("RLE"),

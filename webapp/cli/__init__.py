@@ -14,6 +14,7 @@ from webapp.cli.ingest import frames, ingest, prefilter
 from webapp.cli.jobs import jobs, worker
 from webapp.cli.selftest import selftest
 from webapp.cli.state import CliState
+from webapp.cli.train import runs, train
 from webapp.cli.users import users
 from webapp.cli.workspace import demo, init, serve, synth
 
@@ -32,5 +33,5 @@ def main(ctx: click.Context, data_dir: Path | None) -> None:
 
 
 for command in (init, serve, worker, demo, synth, ingest, prefilter, frames, users, jobs, geometry, bench, selftest,
-                import_capture, import_reconstruction, export_cmd, import_cmd):
+                import_capture, import_reconstruction, export_cmd, import_cmd, train, runs):
     main.add_command(command)

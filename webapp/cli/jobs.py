@@ -11,17 +11,25 @@ from sqlalchemy import select
 from dataset.db import transaction
 from dataset.models import Job
 from dataset.services import jobs as job_service
+from dataset.services import training
 from webapp.cli.errors import service_errors
 from webapp.cli.state import CliState, pass_state
+from webapp.jobs import runs as run_control
 
 
 @click.command()
 @click.option("--concurrency", default=1, show_default=True, type=click.IntRange(1, 64),
               help="Jobs run at once by this worker (threads). Run more workers for more processes.")
 @click.option("--burst", is_flag=True, help="Run the queued jobs (and those they queue) in this process, then exit.")
+@click.option("--queue", "queue_name", type=click.Choice(["default", "train"]), default="default", show_default=True,
+              help="Which queue to take jobs from: train runs only training jobs, default everything else.")
 @pass_state
-def worker(state: CliState, concurrency: int, burst: bool) -> None:
-    """Run jobs from the queue until interrupted (Ctrl-C). Start as many as you like."""
+def worker(state: CliState, concurrency: int, burst: bool, queue_name: str) -> None:
+    """Run jobs from the queue until interrupted (Ctrl-C). Start as many as you like.
+
+    Training jobs have a queue of their own: run `worker --queue train` as well (one per machine
+    whose CPUs or GPUs should train), so that other jobs never wait behind a run that takes hours.
+    """
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     if burst:
         from webapp.jobs.handlers import HANDLERS
@@ -33,8 +41,9 @@ def worker(state: CliState, concurrency: int, burst: bool) -> None:
             raise click.ClickException("some jobs did not succeed; see `illusion-studio jobs list`")
         return
     queue = state.runtime.queue
-    click.echo(f"worker {job_service.worker_id()} on {state.settings.queue_url or state.settings.queue_path}", err=True)
-    queue.run_worker(concurrency)
+    click.echo(f"worker {job_service.worker_id()} ({queue_name} queue) on "
+               f"{state.settings.queue_url or state.settings.queue_path}", err=True)
+    queue.run_worker(concurrency, queue_name)
 
 
 @click.group()
@@ -63,10 +72,15 @@ def list_jobs(state: CliState, state_filter: str | None, as_json: bool) -> None:
 @click.argument("job_id", type=int)
 @pass_state
 def retry(state: CliState, job_id: int) -> None:
-    """Queue a failed or interrupted job again."""
+    """Queue a failed or interrupted job again (a training job: resume its run)."""
     with service_errors():
-        state.runtime.queue.retry(job_id)
-    click.echo(f"job {job_id} queued again")
+        with state.runtime.sessions() as s:
+            run_id = training.run_of_job(s, job_id)
+        if run_id is not None:
+            run_control.resume(state.runtime, run_id, None)
+        else:
+            state.runtime.queue.retry(job_id)
+    click.echo(f"job {job_id} queued again" + (f" (run {run_id} resumes)" if run_id is not None else ""))
 
 
 @jobs.command("show")

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import click
@@ -22,6 +24,9 @@ from webapp.settings import HOME_ENV, Settings, SettingsError, load_settings
 
 DEMO_DIR = Path("var/demo")
 DEMO_PASSWORD = "{role}-demo"
+# The demo's run: short enough for a minute of CPU, long enough for curves, a validation and checkpoints.
+DEMO_TRAIN = {"train.steps": 40, "train.batch_size": 2, "train.crop": (96, 192), "train.val_every": 20,
+              "train.checkpoint_every": 20}
 
 
 def init_workspace(data_dir: Path | None) -> Settings:
@@ -150,15 +155,18 @@ def demo(state: CliState, no_serve: bool, videos: int, host: str | None, port: i
         return
 
     env = {**os.environ, HOME_ENV: str(settings.home)}
-    worker = subprocess.Popen([sys.executable, "-m", "webapp.cli", "worker"], env=env)
-    click.echo(f"worker started (pid {worker.pid})", err=True)
-    # Python skips `finally` on SIGTERM; turn it into an exit so the worker is stopped with us.
+    workers = [subprocess.Popen([sys.executable, "-m", "webapp.cli", "worker", "--queue", queue], env=env)
+               for queue in ("default", "train")]
+    click.echo(f"workers started (pids {', '.join(str(w.pid) for w in workers)}: default and train queues)", err=True)
+    # Python skips `finally` on SIGTERM; turn it into an exit so the workers are stopped with us.
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
     try:
         _serve(state, host, port, threads=8)
     finally:
-        worker.terminate()
-        worker.wait(timeout=30)
+        for worker in workers:
+            worker.terminate()
+        for worker in workers:
+            worker.wait(timeout=30)
 
 
 def _prepare_demo(rt: Runtime) -> None:
@@ -181,9 +189,51 @@ def _prepare_demo(rt: Runtime) -> None:
         bar.update(1)
         _report_jobs(job_service.run_queued_jobs(HANDLERS, rt))
         bar.update(1)
-    # Every job row has run here, so the queue holds only their now-stale messages: drop them
-    # rather than have the worker wake up for each.
-    rt.queue.huey.flush()
+    _train_demo_model(rt)
+    # Every job row has run here, so the queues hold only their now-stale messages: drop them
+    # rather than have the workers wake up for each.
+    for huey in rt.queue.hueys.values():
+        huey.flush()
+
+
+def _train_demo_model(rt: Runtime) -> None:
+    """Accept the generated samples and train a short `lite` run on them, marked as the current model."""
+    from dataset.services import training
+    from dataset.services.demo import accept_generated_samples
+    from dataset.services.errors import InvalidInput
+    from webapp.jobs import runs as run_control
+    from webapp.jobs.handlers import HANDLERS
+
+    with transaction(rt.sessions) as s:
+        curator = s.scalar(select(User).where(User.name == Role.curator.value))
+        admin = s.scalar(select(User).where(User.name == Role.admin.value))
+        accepted = accept_generated_samples(s, curator)
+    click.echo(f"{accepted} generated samples accepted", err=True)
+    if importlib.util.find_spec("torch") is None:
+        click.echo("no demo training run: torch is not installed (pip install -e '.[models]')", err=True)
+        return
+    try:
+        with transaction(rt.sessions) as s:
+            run = run_control.launch(rt, s, preset="lite", overrides=DEMO_TRAIN, selection=training.DataSelection(),
+                                     launch=training.Launch(split=training.parse_split(training.DEFAULT_SPLIT)),
+                                     user=s.get(User, admin.id))
+            run_id = run.id
+    except InvalidInput as exc:
+        click.echo(f"no demo training run: {exc}", err=True)
+        return
+    click.echo(f"training demo run {run_id} ({DEMO_TRAIN['train.steps']} steps of lite) …", err=True)
+    started = time.monotonic()
+    results = job_service.run_queued_jobs(HANDLERS, rt)
+    _report_jobs(results)
+    if any(job_state != JobState.succeeded for _, job_state in results):
+        click.echo(f"the demo run did not succeed; see `illusion-studio runs show {run_id}`", err=True)
+        return
+    try:
+        doc = run_control.promote(rt, run_id, "best", admin)
+    except InvalidInput:  # no finite validation EPE, so no best checkpoint: the last one will do
+        doc = run_control.promote(rt, run_id, "last", admin)
+    click.echo(f"demo run {run_id} trained in {time.monotonic() - started:.0f} s; current model: step {doc['step']}",
+               err=True)
 
 
 def _report_jobs(results: list[tuple[int, JobState]]) -> None:

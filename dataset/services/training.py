@@ -1,0 +1,465 @@
+"""Training runs: launching one over a pinned dataset version, and mirroring its progress into the database.
+
+A run is a directory ``<home>/runs/<id>/`` and a :class:`TrainingRun` row. The product writes
+``run.json`` (the engine's whole input: config, dataset version, splits) once, atomically; the
+engine (``torchrun -m model.train RUN_DIR``) appends events to ``progress.jsonl`` and writes
+checkpoints, and the train job feeds those events to :func:`apply_events`. Config resolution
+(preset + overrides) is the model's business, so this module receives the resolved config.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+from collections import Counter, defaultdict
+from collections.abc import Iterable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy import and_, or_, select
+from sqlalchemy.orm import Session
+
+from dataset.atomic import atomic_write_bytes
+from dataset.export.splits import parse_split_spec, split_of
+from dataset.media import MediaStore
+from dataset.models import IllusionType, JobState, RunState, TrainingMetric, TrainingRun, User, utcnow
+from dataset.readers import READER_FORMATS, open_reader
+from dataset.readers.version import pin_dataset_version, split_by_video, version_media_keys
+from dataset.services import audit
+from dataset.services.errors import Conflict, InvalidInput, NotFound
+
+SPLITS = ("train", "val", "test")
+DEFAULT_SPLIT = "train=0.8,val=0.1,test=0.1"
+SAMPLE_KINDS = ("synthesized", "capture")
+DATABASE = "database"
+MAX_PROCESSES = 64
+_DEVICES = re.compile(r"^(auto|cpu|cuda|cuda:\d+(,\d+)*)$")
+_CHECKPOINT = re.compile(r"^step_(\d+)\.pt$")
+
+
+@dataclass(frozen=True)
+class DataSelection:
+    """What a run trains on: accepted samples of the database (filtered), or a dataset folder."""
+
+    video_ids: tuple[int, ...] = ()
+    illusion_types: tuple[str, ...] = ()
+    kinds: tuple[str, ...] = ()
+    qa_ok: bool = False  # only samples without QA flags
+    format: str = DATABASE
+    root: str | None = None  # the folder, for any format but the database
+
+    def describe(self) -> str:
+        if self.format != DATABASE:
+            return f"{self.format} folder {self.root}"
+        parts = [f"videos {', '.join(map(str, self.video_ids))}" if self.video_ids else "",
+                 f"illusion types {', '.join(self.illusion_types)}" if self.illusion_types else "",
+                 f"kinds {', '.join(self.kinds)}" if self.kinds else "", "without QA flags" if self.qa_ok else ""]
+        return "accepted samples" + "".join(f", {p}" for p in parts if p)
+
+
+@dataclass(frozen=True)
+class Launch:
+    """How a run is started: processes per node and devices, and where it starts from."""
+
+    nproc: int = 1
+    devices: str = "auto"  # auto, cpu, cuda, cuda:0,1 (the GPUs the trainers may see)
+    init_checkpoint: str | None = None
+    nnodes: int = 1
+    rdzv_endpoint: str | None = None  # host:port of the rendezvous for a multi-node run
+    split: dict[str, float] = field(default_factory=dict)
+    seed: int = 0
+
+
+def run_dir(runs_dir: Path, run_id: int) -> Path:
+    return runs_dir / str(run_id)
+
+
+def parse_split(text: str) -> dict[str, float]:
+    """``train=0.8,val=0.1,test=0.1`` → fractions; only train/val/test, train and val > 0."""
+    fractions = parse_split_spec(text)
+    unknown = sorted(set(fractions) - set(SPLITS))
+    if unknown:
+        raise InvalidInput(f"split {unknown[0]!r}: a run splits into {', '.join(SPLITS)} only")
+    for needed in ("train", "val"):
+        if fractions.get(needed, 0.0) <= 0:
+            raise InvalidInput(f"split: {needed} needs a fraction > 0 (validation picks the checkpoints)")
+    return {name: fractions.get(name, 0.0) for name in SPLITS}
+
+
+def validate_selection(selection: DataSelection) -> None:
+    if selection.format == DATABASE:
+        if selection.root:
+            raise InvalidInput("--data names a folder; give its --format (the database needs no folder)")
+        bad = [t for t in selection.illusion_types if t not in IllusionType.__members__]
+        if bad:
+            raise InvalidInput(f"illusion type {bad[0]!r}: expected one of {', '.join(IllusionType)}")
+        bad = [k for k in selection.kinds if k not in SAMPLE_KINDS]
+        if bad:
+            raise InvalidInput(f"kind {bad[0]!r}: expected {' or '.join(SAMPLE_KINDS)}")
+        return
+    if selection.format not in READER_FORMATS:
+        raise InvalidInput(f"data format {selection.format!r}: expected {DATABASE} or one of {', '.join(READER_FORMATS)}")
+    if not selection.root or not Path(selection.root).is_dir():
+        raise InvalidInput(f"data folder {selection.root!r} is not a directory")
+    if selection.video_ids or selection.illusion_types or selection.kinds or selection.qa_ok:
+        raise InvalidInput("video, illusion type, kind and QA filters select from the database, not from a folder")
+
+
+def validate_launch(launch: Launch) -> None:
+    if not 1 <= launch.nproc <= MAX_PROCESSES:
+        raise InvalidInput(f"processes must be 1..{MAX_PROCESSES}, got {launch.nproc}")
+    if not 1 <= launch.nnodes <= 1024:
+        raise InvalidInput(f"nodes must be 1..1024, got {launch.nnodes}")
+    if launch.nnodes > 1 and not launch.rdzv_endpoint:
+        raise InvalidInput("a multi-node run needs a rendezvous endpoint HOST:PORT that every node reaches")
+    if launch.rdzv_endpoint and not re.match(r"^[A-Za-z0-9_.\-\[\]:]+:\d{1,5}$", launch.rdzv_endpoint):
+        raise InvalidInput(f"rendezvous endpoint {launch.rdzv_endpoint!r}: expected HOST:PORT")
+    if not _DEVICES.match(launch.devices):
+        raise InvalidInput(f"devices {launch.devices!r}: expected auto, cpu, cuda or cuda:0,1,…")
+    if launch.seed < 0:
+        raise InvalidInput(f"seed must be ≥ 0, got {launch.seed}")
+    if launch.init_checkpoint is not None and not Path(launch.init_checkpoint).is_file():
+        raise InvalidInput(f"init checkpoint {launch.init_checkpoint} is not a file")
+
+
+def pin_selection(session: Session, media: MediaStore, selection: DataSelection) -> dict[str, Any]:
+    """The dataset version a run trains on; an empty selection is refused with the reason."""
+    if selection.format != DATABASE:
+        return _pin_folder(selection)
+    version = pin_dataset_version(
+        session, media, video_ids=list(selection.video_ids) or None,
+        illusion_types=list(selection.illusion_types) or None, kinds=list(selection.kinds) or None,
+        qa_flags=[] if selection.qa_ok else None)
+    if not version["items"]:
+        raise InvalidInput(f"nothing to train on: no {selection.describe()} in the database; "
+                           "accept samples on the Samples page or widen the selection")
+    return version
+
+
+def _pin_folder(selection: DataSelection) -> dict[str, Any]:
+    """A folder's version: its sample names (a folder's files are the user's to keep unchanged)."""
+    reader = open_reader(selection.format, Path(selection.root or ""))
+    names = list(reader.names)
+    if not names:
+        raise InvalidInput(f"nothing to train on: the {selection.describe()} holds no samples")
+    digest = hashlib.sha256(json.dumps([selection.format, names]).encode()).hexdigest()
+    return {"id": digest, "created_at": utcnow().isoformat() + "Z",
+            "filters": {"format": selection.format, "root": selection.root},
+            "items": [{"name": n, "video_id": _folder_group(n), "kind": "synthesized"} for n in names]}
+
+
+def _is_folder(version: dict[str, Any]) -> bool:
+    return "format" in version.get("filters", {})
+
+
+def _folder_group(name: str) -> str:
+    """A folder sample's video: its name without the last part (``video_3/frame_0007`` → ``video_3``)."""
+    return name.rpartition("/")[0] or name
+
+
+def split_version(version: dict[str, Any], fractions: dict[str, float], seed: int) -> dict[str, list[Any]]:
+    """Split by video; refuse when train or validation would be empty (too few videos)."""
+    if _is_folder(version):
+        splits = _split_folder(version, fractions, seed)
+    else:
+        splits = split_by_video(version, fractions, seed)
+    splits = {name: list(splits.get(name, [])) for name in SPLITS}
+    videos = len({item["video_id"] for item in version["items"]})
+    for needed in ("train", "val"):
+        if not splits[needed]:
+            raise InvalidInput(f"the selection holds {videos} video(s) and the {needed} split came out empty; "
+                               "select samples of more videos (no video is in two splits) or change --split")
+    return splits
+
+
+def _split_folder(version: dict[str, Any], fractions: dict[str, float], seed: int) -> dict[str, list[str]]:
+    spec = {name: f for name, f in fractions.items() if f > 0}
+    out: dict[str, list[str]] = defaultdict(list)
+    for item in version["items"]:
+        out[split_of(item["video_id"], spec, seed)].append(item["name"])
+    return out
+
+
+def create_run(session: Session, media: MediaStore, runs_dir: Path, *, preset: str, config: dict[str, Any],
+               selection: DataSelection, launch: Launch, user: User | None) -> TrainingRun:
+    """Validate, pin the dataset version, split it, and write the run directory with ``run.json``.
+
+    The row is flushed (it has its id) but not committed; the caller queues the train job in the
+    same transaction. ``config`` is the resolved preset (``Config.to_dict()``).
+    """
+    validate_selection(selection)
+    validate_launch(launch)
+    version = pin_selection(session, media, selection)
+    splits = split_version(version, launch.split, launch.seed)
+    run = TrainingRun(preset=preset, config=config, dataset_id=version["id"], dataset=version, splits=splits,
+                      launch={**asdict(launch), "data": asdict(selection)},
+                      created_by_id=user.id if user else None)
+    session.add(run)
+    session.flush()
+    write_run_json(run_dir(runs_dir, run.id), run, media.root)
+    if user is not None:
+        audit.record(session, user.id, "run.launch", "run", run.id, preset=preset, dataset=version["id"])
+    return run
+
+
+def write_run_json(directory: Path, run: TrainingRun, media_root: Path) -> None:
+    """The engine's input, written once; a retry finds the same file."""
+    selection = run.launch["data"]
+    data = {"format": selection["format"], "root": selection["root"]}
+    doc = {"config": run.config, "dataset": run.dataset, "splits": run.splits, "media_root": str(media_root),
+           "init_checkpoint": run.launch.get("init_checkpoint"), "data": data, "run": run.id,
+           "device": engine_device(run.launch.get("devices", "auto"))}
+    atomic_write_bytes(directory / "run.json", json.dumps(doc, indent=1).encode())
+
+
+def engine_device(devices: str) -> str | None:
+    """The engine's device from a launch's ``devices``: which GPUs (``cuda:0,1``) is the launcher's
+    business (CUDA_VISIBLE_DEVICES); each rank then takes its local GPU."""
+    if devices == "auto":
+        return None
+    return "cuda" if devices.startswith("cuda") else devices
+
+
+def get_run(session: Session, run_id: int) -> TrainingRun:
+    run = session.get(TrainingRun, run_id)
+    if run is None:
+        raise NotFound(f"no run {run_id}")
+    return run
+
+
+def run_of_job(session: Session, job_id: int) -> int | None:
+    """The run whose train job is ``job_id`` (retrying that job means resuming the run)."""
+    return session.scalar(select(TrainingRun.id).where(TrainingRun.job_id == job_id))
+
+
+def effective_state(run: TrainingRun) -> RunState:
+    """The run's state, with a lost worker shown: the reaper marks the job, not the run."""
+    if run.state in (RunState.queued, RunState.running) and run.job is not None \
+            and run.job.state == JobState.interrupted:
+        return RunState.interrupted
+    return run.state
+
+
+def kind_counts(version: dict[str, Any]) -> dict[str, int]:
+    counts = Counter(item.get("kind", "synthesized") for item in version.get("items", []))
+    return {kind: counts.get(kind, 0) for kind in SAMPLE_KINDS}
+
+
+def checkpoint_files(directory: Path) -> list[dict[str, Any]]:
+    """The checkpoints on disk, newest step first, then ``best.pt``: name, step (None for best), bytes."""
+    folder = directory / "checkpoints"
+    found = []
+    for path in folder.glob("*.pt") if folder.is_dir() else []:
+        match = _CHECKPOINT.match(path.name)
+        if match or path.name == "best.pt":
+            found.append({"name": path.name, "path": str(path), "step": int(match.group(1)) if match else None,
+                          "bytes": path.stat().st_size})
+    return sorted(found, key=lambda c: (c["step"] is None, -(c["step"] or 0)))
+
+
+def run_json(run: TrainingRun, runs_dir: Path, *, current: dict[str, Any] | None = None,
+             full: bool = False) -> dict[str, Any]:
+    """What the CLI (``--json``) and the API say about a run; ``full`` adds config, version and splits."""
+    directory = run_dir(runs_dir, run.id)
+    last = directory / run.last_checkpoint if run.last_checkpoint else None
+    best = directory / "checkpoints" / "best.pt"
+    duration = ((run.finished_at or utcnow()) - run.started_at).total_seconds() if run.started_at else None
+    data: dict[str, Any] = {
+        "run": run.id, "job": run.job_id, "state": effective_state(run).value, "preset": run.preset,
+        "step": run.step, "steps": run.steps or run.config.get("train", {}).get("steps", 0),
+        "progress": (run.step / run.steps) if run.steps else 0.0,
+        "checkpoint": str(last) if last is not None and last.is_file() else None,
+        "best_checkpoint": str(best) if best.is_file() else None,
+        "resumed_from_step": run.resumed_from_step, "world_size": run.world_size,
+        "loss": run.loss, "lr": run.lr, "samples_per_s": run.samples_per_s, "eta_s": run.eta_s,
+        "best_val_epe": run.best_val_epe, "best_step": run.best_step, "last_val": run.last_val or None,
+        "reason": run.reason, "cancel_requested": run.cancel_requested,
+        "dataset": {"id": run.dataset_id, "samples": len(run.dataset.get("items", [])),
+                    "kinds": kind_counts(run.dataset), "filters": run.dataset.get("filters", {}),
+                    "splits": {name: len(ids) for name, ids in run.splits.items()}},
+        "launch": run.launch, "run_dir": str(directory),
+        "current": bool(current and current.get("run") == run.id),
+        "created_by": run.created_by.name if run.created_by else None,
+        "created_at": _iso(run.created_at), "started_at": _iso(run.started_at),
+        "finished_at": _iso(run.finished_at), "duration_s": duration,
+    }
+    if full:
+        data.update(config=run.config, version=run.dataset, splits=run.splits,
+                    checkpoints=checkpoint_files(directory))
+    return data
+
+
+def _iso(value: Any) -> str | None:
+    return value.isoformat() + "Z" if value is not None else None
+
+
+def list_runs(session: Session, run_ids: Sequence[int] | None = None) -> list[TrainingRun]:
+    query = select(TrainingRun).order_by(TrainingRun.id.desc())
+    if run_ids:
+        query = query.where(TrainingRun.id.in_(list(run_ids)))
+    return list(session.scalars(query))
+
+
+def metrics_since(session: Session, run_id: int, after_step: int = -1, after_val: int = -1) -> dict[str, list[dict[str, Any]]]:
+    """The run's curve points past what a chart has: ``{"step": [training points with step > after_step],
+    "val": [validations with step > after_val]}``, by step (a validation lands after its step's point)."""
+    get_run(session, run_id)
+    out: dict[str, list[dict[str, Any]]] = {"step": [], "val": []}
+    rows = session.scalars(select(TrainingMetric).where(
+        TrainingMetric.run_id == run_id,
+        or_(and_(TrainingMetric.kind == "step", TrainingMetric.step > after_step),
+            and_(TrainingMetric.kind == "val", TrainingMetric.step > after_val))).order_by(TrainingMetric.step))
+    for row in rows:
+        out.setdefault(row.kind, []).append({"step": row.step, **row.values})
+    return out
+
+
+# --- control -----------------------------------------------------------------------------------
+
+def request_cancel(session: Session, run: TrainingRun, user: User | None) -> None:
+    """Ask the run to stop: a queued run ends now, a running one when its job has stopped the trainers."""
+    state = effective_state(run)
+    if state.finished:
+        raise Conflict(f"run {run.id} is {state.value}; only queued or running runs can be cancelled")
+    run.cancel_requested = True
+    who = user.name if user else "the command line"
+    run.reason = f"cancelled by {who}"
+    if run.job is not None and run.job.state == JobState.queued:
+        run.job.state, run.job.error, run.job.finished_at = JobState.failed, run.reason, utcnow()
+        run.state, run.finished_at = RunState.cancelled, utcnow()
+    if user is not None:
+        audit.record(session, user.id, "run.cancel", "run", run.id)
+
+
+def prepare_resume(session: Session, run: TrainingRun, user: User | None) -> int:
+    """Check that the run can go on from its last checkpoint; returns the job id to retry."""
+    state = effective_state(run)
+    if state not in (RunState.interrupted, RunState.failed, RunState.cancelled):
+        hint = {RunState.diverged: "; it would diverge again: launch a new run (lower --lr) with --init "
+                                   "from its last checkpoint"}.get(state, "")
+        raise Conflict(f"run {run.id} is {state.value}; only interrupted, failed or cancelled runs resume{hint}")
+    if run.job_id is None:
+        raise Conflict(f"run {run.id} has lost its job row; launch a new run")
+    run.state, run.cancel_requested, run.reason, run.finished_at = RunState.queued, False, None, None
+    if user is not None:
+        audit.record(session, user.id, "run.resume", "run", run.id, from_step=run.step)
+    return run.job_id
+
+
+def start_attempt(session: Session, run_id: int, job_id: int) -> TrainingRun:
+    """The train job begins (or retries): the run is running again, unless it was cancelled meanwhile."""
+    run = get_run(session, run_id)
+    if run.cancel_requested:
+        raise Conflict(f"run {run_id} was {run.reason or 'cancelled'} before it started")
+    run.state, run.job_id, run.reason, run.finished_at = RunState.running, job_id, None, None
+    run.started_at = run.started_at or utcnow()
+    return run
+
+
+# --- progress ----------------------------------------------------------------------------------
+
+def read_events(path: Path, offset: int) -> tuple[list[dict[str, Any]], int]:
+    """The complete JSON lines of ``path`` after byte ``offset``, and the offset after them.
+
+    A line still being written (no newline yet) waits for the next call; a line that is not JSON
+    is skipped, so one bad write cannot stall the mirror.
+    """
+    if not path.is_file():
+        return [], offset
+    with path.open("rb") as fh:
+        fh.seek(offset)
+        chunk = fh.read()
+    end = chunk.rfind(b"\n") + 1
+    events = []
+    for line in chunk[:end].splitlines():
+        try:
+            event = json.loads(line)
+        except ValueError:
+            continue
+        if isinstance(event, dict):
+            events.append(event)
+    return events, offset + end
+
+
+def apply_events(session: Session, run: TrainingRun, events: Iterable[dict[str, Any]]) -> dict[str, Any] | None:
+    """Mirror engine events into the run row and its metric points; returns the ``end`` event if one came.
+
+    Idempotent: a resumed run repeats the steps after its checkpoint, and their points are overwritten.
+    """
+    end = None
+    for event in events:
+        kind = event.get("event")
+        step = int(event.get("step") or 0)
+        if kind == "start":
+            run.steps, run.world_size = int(event.get("steps") or run.steps), event.get("world_size")
+            run.resumed_from_step, run.step = event.get("resumed_from_step"), step
+        elif kind == "step":
+            run.step, run.steps = step, int(event.get("steps") or run.steps)
+            run.loss, run.lr = _number(event.get("loss")), _number(event.get("lr"))
+            run.samples_per_s, run.eta_s = _number(event.get("samples_per_s")), _number(event.get("eta_s"))
+            _put_point(session, run.id, "step", step, {"loss": run.loss, "lr": run.lr,
+                                                       "samples_per_s": run.samples_per_s})
+        elif kind == "val":
+            metrics, images = event.get("metrics") or {}, list(event.get("images") or [])
+            _put_point(session, run.id, "val", step, {"metrics": metrics, "images": images})
+            run.last_val = {"step": step, "metrics": metrics, "images": images}
+            epe = _number((metrics.get("all") or {}).get("epe"))
+            if epe is not None and (run.best_val_epe is None or epe < run.best_val_epe):
+                run.best_val_epe = epe
+        elif kind == "checkpoint":
+            if event.get("best"):  # best.pt, a copy of (or beside) the step's file
+                run.best_step = step
+            elif event.get("path"):
+                run.last_checkpoint = str(event["path"])
+        elif kind == "end":
+            end = event
+            run.step = max(run.step, step)
+    return end
+
+
+def _number(value: Any) -> float | None:
+    """JSON numbers as floats; NaN/inf (a diverging loss) and non-numbers as None."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        return None
+    return number if abs(number) != float("inf") and number == number else None
+
+
+def _put_point(session: Session, run_id: int, kind: str, step: int, values: dict[str, Any]) -> None:
+    point = session.scalar(select(TrainingMetric).where(TrainingMetric.run_id == run_id, TrainingMetric.kind == kind,
+                                                        TrainingMetric.step == step))
+    if point is None:
+        session.add(TrainingMetric(run_id=run_id, kind=kind, step=step, values=values))
+    else:
+        point.values = values
+
+
+def finish_run(run: TrainingRun, end: dict[str, Any] | None, exit_code: int | None) -> RunState:
+    """The run's final state from the engine's ``end`` event and the trainers' exit status."""
+    if run.cancel_requested:
+        state = RunState.cancelled
+    elif end is not None and end.get("state") in ("succeeded", "diverged", "failed"):
+        state = RunState(end["state"])
+        if state == RunState.succeeded and exit_code:
+            state = RunState.failed
+        run.reason = end.get("reason") or (None if state == RunState.succeeded
+                                           else f"trainers exited with status {exit_code}")
+    else:
+        state = RunState.failed
+        run.reason = f"trainers exited with status {exit_code} before the end of the run; see the job log"
+    run.state, run.finished_at = state, utcnow()
+    return state
+
+
+# --- what runs keep ----------------------------------------------------------------------------
+
+def pinned_media_keys(session: Session) -> set[str]:
+    """Every media key a run's dataset version pins: media gc must keep these files."""
+    keys: set[str] = set()
+    for version in session.scalars(select(TrainingRun.dataset)):
+        if version and not _is_folder(version):
+            keys |= version_media_keys(version)
+    return keys

@@ -1,0 +1,192 @@
+"""`illusion-studio train …` and `illusion-studio runs …`: launch, follow and manage training runs."""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import click
+
+from dataset.db import transaction
+from dataset.models import IllusionType
+from dataset.services import training
+from model import registry
+from webapp.cli.errors import service_errors
+from webapp.cli.state import CliState, pass_state
+from webapp.jobs import runs as run_control
+
+NO_WORKER_HINT_S = 15.0
+
+
+@click.command()
+@click.option("--preset", default="lite", show_default=True, type=click.Choice(["lite", "paper"]))
+@click.option("--steps", type=click.IntRange(1), help="Training steps (preset's by default).")
+@click.option("--batch", type=click.IntRange(1), help="Global batch size.")
+@click.option("--lr", type=click.FloatRange(min=0, min_open=True), help="Peak learning rate (OneCycle).")
+@click.option("--crop", help="Random crop HxW in pixels, e.g. 320x736.")
+@click.option("--iters", type=click.IntRange(1), help="GRU iterations in training.")
+@click.option("--devices", default="auto", show_default=True, help="auto, cpu, cuda, or cuda:0,1 (GPUs to use).")
+@click.option("--nproc", default=1, show_default=True, type=click.IntRange(1, training.MAX_PROCESSES),
+              help="Trainer processes on this machine (DDP: gloo on CPU, NCCL on CUDA).")
+@click.option("--nnodes", default=1, show_default=True, type=click.IntRange(1, 1024),
+              help="Machines in the run; the others join with torchrun (see README).")
+@click.option("--rdzv-endpoint", help="HOST:PORT of the c10d rendezvous, for --nnodes > 1.")
+@click.option("--video", "video_ids", multiple=True, type=int, help="Only samples of this video id (repeatable).")
+@click.option("--illusion-type", "illusion_types", multiple=True, type=click.Choice([t.value for t in IllusionType]),
+              help="Only samples of videos showing this illusion type (repeatable).")
+@click.option("--kind", "kinds", multiple=True, type=click.Choice(training.SAMPLE_KINDS),
+              help="Synthesized (web, generated) or capture (real stereo + LiDAR) samples (repeatable).")
+@click.option("--qa-ok", is_flag=True, help="Only samples without QA flags.")
+@click.option("--data", "data_root", type=click.Path(file_okay=False, path_type=Path),
+              help="Train on a dataset folder instead of the database (needs --format).")
+@click.option("--format", "data_format", default=None, help="Folder format: native, authors, sceneflow, …")
+@click.option("--split", default=training.DEFAULT_SPLIT, show_default=True,
+              help="Fractions of videos in train/val/test; no video is in two splits.")
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(0), help="Split, init and data-order seed.")
+@click.option("--init", "init_checkpoint", type=click.Path(dir_okay=False, path_type=Path),
+              help="Start from this checkpoint's weights (fine-tuning; not a resume).")
+@click.option("--wait", is_flag=True, help="Wait for the run to end; exit non-zero unless it succeeds.")
+@click.option("--json", "as_json", is_flag=True, help="Print the run as one JSON object.")
+@pass_state
+def train(state: CliState, preset: str, steps: int | None, batch: int | None, lr: float | None, crop: str | None,
+          iters: int | None, devices: str, nproc: int, nnodes: int, rdzv_endpoint: str | None,
+          video_ids: tuple[int, ...], illusion_types: tuple[str, ...], kinds: tuple[str, ...], qa_ok: bool,
+          data_root: Path | None, data_format: str | None, split: str, seed: int, init_checkpoint: Path | None,
+          wait: bool, as_json: bool) -> None:
+    """Train the fusion model on accepted samples (or a dataset folder) as a job on the train queue."""
+    rt = state.runtime
+    if data_root is not None and data_format is None:
+        raise click.ClickException("--data needs --format (native, authors, sceneflow, …)")
+    selection = training.DataSelection(
+        video_ids=video_ids, illusion_types=illusion_types, kinds=kinds, qa_ok=qa_ok,
+        format=data_format or training.DATABASE, root=str(data_root.resolve()) if data_root else None)
+    with service_errors():
+        launch = training.Launch(nproc=nproc, devices=devices, nnodes=nnodes, rdzv_endpoint=rdzv_endpoint,
+                                 init_checkpoint=str(init_checkpoint.resolve()) if init_checkpoint else None,
+                                 split=training.parse_split(split), seed=seed)
+        overrides = run_control.overrides_from(steps=steps, batch=batch, lr=lr, crop=crop, iters=iters)
+        with transaction(rt.sessions) as s:
+            run = run_control.launch(rt, s, preset=preset, overrides=overrides, selection=selection,
+                                     launch=launch, user=None)
+            run_id, job_id = run.id, run.job_id
+    click.echo(f"run {run_id}: job {job_id} on the train queue "
+               f"(`illusion-studio --data-dir {state.settings.home} worker --queue train` runs it)", err=True)
+    if nnodes > 1:
+        click.echo("on each other node, once this one runs it:\n  " + other_node_command(
+            training.run_dir(state.settings.runs_dir, run_id), nproc, nnodes, rdzv_endpoint or ""), err=True)
+    data = _wait(state, run_id) if wait else _show(state, run_id)
+    _print(data, as_json)
+    if wait and data["state"] != "succeeded":
+        raise click.ClickException(f"run {run_id} {data['state']}: {data['reason']}")
+
+
+def other_node_command(directory: Path, nproc: int, nnodes: int, endpoint: str) -> str:
+    """What the other machines of a multi-node run start (the run directory on shared storage)."""
+    return (f"python -m torch.distributed.run --nnodes {nnodes} --nproc-per-node {nproc} --rdzv-backend c10d "
+            f"--rdzv-endpoint {endpoint} --rdzv-id run-{directory.name} -m model.train {directory}")
+
+
+def _show(state: CliState, run_id: int, *, full: bool = False) -> dict[str, Any]:
+    rt = state.runtime
+    with service_errors(), rt.sessions() as s:
+        return training.run_json(training.get_run(s, run_id), rt.settings.runs_dir,
+                                 current=registry.current_model(rt.settings), full=full)
+
+
+def _wait(state: CliState, run_id: int) -> dict[str, Any]:
+    """Follow the run on stderr until it ends."""
+    started, hinted, shown = time.monotonic(), False, None
+    while True:
+        data = _show(state, run_id)
+        line = f"run {run_id}: {data['state']} step {data['step']}/{data['steps']}" + (
+            f" loss {data['loss']:.4g}" if data["loss"] is not None else "")
+        if line != shown:
+            click.echo(line, err=True)
+            shown = line
+        if data["state"] not in ("queued", "running"):
+            return data
+        if not hinted and data["state"] == "queued" and time.monotonic() - started > NO_WORKER_HINT_S:
+            click.echo(f"still queued after {NO_WORKER_HINT_S:.0f} s: is a train worker running? "
+                       f"(`illusion-studio --data-dir {state.settings.home} worker --queue train`)", err=True)
+            hinted = True
+        time.sleep(0.5)
+
+
+def _print(data: dict[str, Any], as_json: bool) -> None:
+    if as_json:
+        click.echo(json.dumps(data, indent=2))
+        return
+    epe = f"{data['best_val_epe']:.3f}" if data["best_val_epe"] is not None else "—"
+    click.echo(f"run {data['run']} {data['state']} step {data['step']}/{data['steps']} best val EPE {epe} "
+               f"checkpoint {data['checkpoint'] or '—'}")
+
+
+@click.group()
+def runs() -> None:
+    """List, inspect, cancel, resume and promote training runs."""
+
+
+@runs.command("list")
+@click.option("--json", "as_json", is_flag=True, help="Print a JSON array.")
+@pass_state
+def list_runs(state: CliState, as_json: bool) -> None:
+    rt = state.runtime
+    current = registry.current_model(rt.settings)
+    with rt.sessions() as s:
+        rows = [training.run_json(r, rt.settings.runs_dir, current=current) for r in training.list_runs(s)]
+    if as_json:
+        click.echo(json.dumps(rows, indent=2))
+        return
+    for r in rows:
+        epe = f"{r['best_val_epe']:.3f}" if r["best_val_epe"] is not None else "—"
+        click.echo(f"{r['run']:>5} {r['preset']:<6} {r['state']:<12} {r['step']:>7}/{r['steps']:<7} "
+                   f"val EPE {epe:<8} data {r['dataset']['id'][:12]}{'  (current)' if r['current'] else ''}")
+
+
+@runs.command("show")
+@click.argument("run_id", type=int)
+@click.option("--json", "as_json", is_flag=True, help="Print JSON (with config, dataset version and checkpoints).")
+@pass_state
+def show(state: CliState, run_id: int, as_json: bool) -> None:
+    data = _show(state, run_id, full=as_json)
+    if as_json:
+        click.echo(json.dumps(data, indent=2))
+        return
+    _print(data, False)
+    click.echo(f"  dataset {data['dataset']['id']}: {data['dataset']['kinds']}, splits {data['dataset']['splits']}")
+    if data["reason"]:
+        click.echo(f"  {data['reason']}")
+
+
+@runs.command("cancel")
+@click.argument("run_id", type=int)
+@pass_state
+def cancel(state: CliState, run_id: int) -> None:
+    """Stop a queued or running run (its trainers' whole process group)."""
+    with service_errors():
+        run_control.cancel(state.runtime, run_id, None)
+    click.echo(f"run {run_id}: cancel requested")
+
+
+@runs.command("resume")
+@click.argument("run_id", type=int)
+@pass_state
+def resume(state: CliState, run_id: int) -> None:
+    """Continue an interrupted, failed or cancelled run from its newest checkpoint."""
+    with service_errors():
+        run_control.resume(state.runtime, run_id, None)
+    click.echo(f"run {run_id}: queued again; it resumes from its newest checkpoint")
+
+
+@runs.command("promote")
+@click.argument("run_id", type=int)
+@click.option("--checkpoint", "which", default="best", show_default=True, help="best, last, or a checkpoint file.")
+@pass_state
+def promote(state: CliState, run_id: int, which: str) -> None:
+    """Make a run's checkpoint the current model (what `predict` and evaluation use by default)."""
+    with service_errors():
+        doc = run_control.promote(state.runtime, run_id, which, None)
+    click.echo(json.dumps(doc), file=sys.stdout)
