@@ -165,7 +165,9 @@ class Frame(Base):
     __tablename__ = "frames"
     __table_args__ = (
         UniqueConstraint("video_id", "index", name="uq_frames_video_index"),
-        Index("ix_frames_state_video", "state", "video_id"),
+        # One index per grid filter, each ending in the grids' order, so a page is a range scan.
+        Index("ix_frames_state_video_index", "state", "video_id", "index"),
+        Index("ix_frames_state_keep_video_index", "state", "prefilter_keep", "video_id", "index"),
     )
 
     id: Mapped[int] = mapped_column(primary_key=True)
@@ -183,9 +185,25 @@ class Frame(Base):
     )
     prefilter_job_id: Mapped[int | None] = mapped_column(
         ForeignKey("jobs.id", ondelete="SET NULL"), doc="The prefilter job that has claimed this frame.")
+    # The newest prefilter verdict, kept by a database trigger on prefilter_results (migration 0002), so
+    # the review grid filters and pages by it without grouping every verdict.
+    prefilter_result_id: Mapped[int | None] = mapped_column(doc="Id of the newest prefilter result.")
+    prefilter_keep: Mapped[bool | None] = mapped_column(doc="Its keep verdict (null: undecided or none yet).")
     updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
 
     video: Mapped[Video] = relationship(back_populates="frames")
+
+
+class FrameCount(Base):
+    """How many frames each (video, state, verdict) holds; kept by triggers on ``frames`` (migration
+    0002) in the writing transaction, so totals and the funnel never count the frames table."""
+
+    __tablename__ = "frame_counts"
+
+    video_id: Mapped[int] = mapped_column(primary_key=True, autoincrement=False)
+    state: Mapped[FrameState] = mapped_column(_enum(FrameState), primary_key=True)
+    keep: Mapped[int] = mapped_column(primary_key=True, autoincrement=False, doc="prefilter_keep: 1, 0, or -1 for null.")
+    n: Mapped[int]
 
 
 class PrefilterResult(Base):
@@ -218,6 +236,8 @@ class Review(Base):
 
 class Annotation(Base):
     __tablename__ = "annotations"
+    __table_args__ = (Index("ix_annotations_user_updated", "user_id", "updated_at"),
+                      Index("ix_annotations_lease_user_id", "lease_user_id"))
 
     id: Mapped[int] = mapped_column(primary_key=True)
     frame_id: Mapped[int] = mapped_column(ForeignKey("frames.id", ondelete="CASCADE"), unique=True)
@@ -255,7 +275,8 @@ class Sample(Base):
     """A generated stereo training sample and everything needed to judge and reproduce it."""
 
     __tablename__ = "samples"
-    __table_args__ = (UniqueConstraint("frame_id", "annotation_version", name="uq_samples_frame_version"),)
+    __table_args__ = (UniqueConstraint("frame_id", "annotation_version", name="uq_samples_frame_version"),
+                      Index("ix_samples_state_id", "state", "id"), Index("ix_samples_flagged_id", "flagged", "id"))
 
     id: Mapped[int] = mapped_column(primary_key=True)
     frame_id: Mapped[int] = mapped_column(ForeignKey("frames.id", ondelete="CASCADE"), index=True)
@@ -269,14 +290,25 @@ class Sample(Base):
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 
+class SampleCount(Base):
+    """How many samples each (state, flagged) holds; kept by triggers on ``samples`` (migration 0002)."""
+
+    __tablename__ = "sample_counts"
+
+    state: Mapped[SampleState] = mapped_column(_enum(SampleState), primary_key=True)
+    flagged: Mapped[bool] = mapped_column(primary_key=True)
+    n: Mapped[int]
+
+
 class Job(Base):
     """A long-running step; the worker mirrors its state, progress and log here."""
 
     __tablename__ = "jobs"
+    __table_args__ = (Index("ix_jobs_state_id", "state", "id"), Index("ix_jobs_created_by_id", "created_by_id", "id"))
 
     id: Mapped[int] = mapped_column(primary_key=True)
     kind: Mapped[str] = mapped_column(String(64), index=True)
-    state: Mapped[JobState] = mapped_column(_enum(JobState), default=JobState.queued, index=True)
+    state: Mapped[JobState] = mapped_column(_enum(JobState), default=JobState.queued)
     progress: Mapped[float] = mapped_column(default=0.0, doc="0..1")
     params: Mapped[dict[str, Any]] = mapped_column(default=dict)
     result: Mapped[dict[str, Any] | None] = mapped_column(JSON)

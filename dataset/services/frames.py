@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
-from dataset.models import Frame, FrameState, PrefilterResult, Video, utcnow
+from dataset.models import Frame, FrameCount, FrameState, Video, utcnow
 from dataset.services.errors import Conflict, InvalidInput
+from dataset.services.paging import Page, keyset_page
 
 # Which states count as having reached each funnel stage (rejected/deleted frames drop out).
 _REACHED: dict[str, tuple[FrameState, ...]] = {
@@ -23,8 +25,8 @@ FUNNEL_STAGES = ("videos", "frames", *_REACHED)
 
 
 def funnel_counts(session: Session) -> dict[str, int]:
-    """How many videos, and frames that reached each stage of the pipeline."""
-    by_state = dict(session.execute(select(Frame.state, func.count()).group_by(Frame.state)).all())
+    """How many videos, and frames that reached each stage of the pipeline (from the maintained counts)."""
+    by_state = dict(session.execute(select(FrameCount.state, func.sum(FrameCount.n)).group_by(FrameCount.state)).all())
     counts = {"videos": session.scalar(select(func.count()).select_from(Video)) or 0,
               "frames": sum(n for s, n in by_state.items() if s != FrameState.deleted)}
     for stage, states in _REACHED.items():
@@ -53,27 +55,46 @@ def parse_state(value: str) -> FrameState:
         raise InvalidInput(f"unknown frame state {value!r}; choose one of {', '.join(FrameState)}") from None
 
 
+FRAME_ORDER = (Frame.video_id, Frame.index)  # every frame list's order, and its keyset cursor
+
+
+def frame_total(session: Session, *, video_id: int | None = None, states: Sequence[FrameState] | None = None,
+                keep: bool | None | str = "any") -> int:
+    """How many frames match, from the maintained counts (never a scan of ``frames``).
+
+    ``keep`` is the newest verdict to match: True, False, None (undecided or none), or "any".
+    """
+    query = select(func.coalesce(func.sum(FrameCount.n), 0))
+    if video_id is not None:
+        query = query.where(FrameCount.video_id == video_id)
+    if states is not None:
+        query = query.where(FrameCount.state.in_(list(states)))
+    if keep != "any":
+        query = query.where(FrameCount.keep == {True: 1, False: 0, None: -1}[keep])
+    return int(session.scalar(query) or 0)
+
+
 def list_frames(session: Session, *, video_id: int | None = None, state: FrameState | None = None,
                 limit: int = 100, offset: int = 0) -> tuple[list[dict[str, Any]], int]:
     """A page of frames as JSON-ready dicts, ordered by video and time, and the total count."""
-    if not 1 <= limit <= 10_000 or offset < 0:
-        raise InvalidInput("limit must be 1..10000 and offset ≥ 0")
+    items, total, _ = frames_page(session, video_id=video_id, state=state, limit=limit, offset=offset)
+    return items, total
+
+
+def frames_page(session: Session, *, video_id: int | None = None, state: FrameState | None = None,
+                limit: int = 100, offset: int = 0, after: str | None = None,
+                before: str | None = None) -> tuple[list[dict[str, Any]], int, Page]:
+    """A page of frames as JSON-ready dicts, ordered by video and time; the total count; the cursors."""
     where = []
     if video_id is not None:
         where.append(Frame.video_id == video_id)
     if state is not None:
         where.append(Frame.state == state)
-    total = session.scalar(select(func.count()).select_from(Frame).where(*where)) or 0
-    # The newest prefilter verdict of each frame, joined in one query rather than one per frame.
-    latest = (select(PrefilterResult.frame_id, func.max(PrefilterResult.id).label("rid"))
-              .group_by(PrefilterResult.frame_id).subquery())
-    rows = session.execute(
-        select(Frame, PrefilterResult.keep)
-        .outerjoin(latest, latest.c.frame_id == Frame.id)
-        .outerjoin(PrefilterResult, PrefilterResult.id == latest.c.rid)
-        .where(*where).order_by(Frame.video_id, Frame.index).limit(limit).offset(offset)
-    ).all()
-    return [frame_json(frame, keep) for frame, keep in rows], total
+    # prefilter_keep read as a column: the trigger may have changed it behind a loaded Frame.
+    page = keyset_page(session, select(Frame, Frame.prefilter_keep, *FRAME_ORDER).where(*where), FRAME_ORDER,
+                       limit=limit, after=after, before=before, offset=offset)
+    total = frame_total(session, video_id=video_id, states=None if state is None else [state])
+    return [frame_json(row[0], row[1]) for row in page.rows], total, page
 
 
 def frame_json(frame: Frame, prefilter_keep: bool | None) -> dict[str, Any]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from sqlalchemy import Select, and_, func, select
@@ -11,7 +12,8 @@ from sqlalchemy.orm import Session
 from dataset.models import Frame, FrameState, PrefilterResult, Review, ReviewDecision, User
 from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound, ServiceError
-from dataset.services.frames import frame_json, update_frame
+from dataset.services.frames import FRAME_ORDER, frame_json, frame_total, update_frame
+from dataset.services.paging import bounded_count, keyset_page
 
 REJECT_REASONS = ("blurry", "occluded", "no illusion", "watermark", "duplicate")
 
@@ -81,28 +83,47 @@ def review_many(session: Session, items: Sequence[dict[str, Any]], user: User | 
 
 def review_query(*, video_id: int | None, states: Sequence[FrameState], keep: str | None,
                  question: int | None = None, answer: str | None = None) -> Select[Any]:
-    """Frames with their newest prefilter result, filtered by state, verdict and one question's answer."""
-    latest = (select(PrefilterResult.frame_id, func.max(PrefilterResult.id).label("rid"))
-              .group_by(PrefilterResult.frame_id).subquery())
-    query = (select(Frame, PrefilterResult)
-             .outerjoin(latest, latest.c.frame_id == Frame.id)
-             .outerjoin(PrefilterResult, PrefilterResult.id == latest.c.rid)
+    """Frames with their newest prefilter result, filtered by state, verdict and one question's answer.
+
+    Rows are (Frame, PrefilterResult or None, video_id, index), in the grid's order; the newest
+    result is the one ``frames.prefilter_result_id`` points at, so no verdicts are grouped.
+    """
+    query = (select(Frame, PrefilterResult, *FRAME_ORDER)
+             .outerjoin(PrefilterResult, PrefilterResult.id == Frame.prefilter_result_id)
              .where(Frame.state.in_(states)))
     if video_id is not None:
         query = query.where(Frame.video_id == video_id)
     if keep is not None:
-        values = {"true": True, "false": False}
-        query = query.where(PrefilterResult.keep.is_(None) if keep == "null" else PrefilterResult.keep == values[keep])
+        query = query.where(Frame.prefilter_keep.is_(None) if keep == "null" else Frame.prefilter_keep == _KEEP[keep])
     if question is not None:
         value = PrefilterResult.answers[question - 1].as_boolean()  # a JSON path on SQLite and PostgreSQL alike
         query = query.where(value.is_(None) if answer == "unknown" else value == (answer == "yes"))
-    return query.order_by(Frame.video_id, Frame.index)
+    return query.order_by(*FRAME_ORDER)
+
+
+@dataclass(frozen=True)
+class ReviewListing:
+    items: list[dict[str, Any]]
+    total: int
+    total_exact: bool  # False: at least ``total`` (a question filter's count stops at COUNT_CAP)
+    prev: str | None
+    next: str | None
 
 
 def list_review_items(session: Session, *, video_id: int | None = None, state: str = "prefiltered",
                       keep: str | None = None, question: int | None = None, answer: str | None = None,
                       limit: int = 60, offset: int = 0) -> tuple[list[dict[str, Any]], int]:
     """A page of frames for the review grid, with VLM answers, measured figures and the last decision."""
+    listing = review_page(session, video_id=video_id, state=state, keep=keep, question=question, answer=answer,
+                          limit=limit, offset=offset)
+    return listing.items, listing.total
+
+
+def review_page(session: Session, *, video_id: int | None = None, state: str = "prefiltered",
+                keep: str | None = None, question: int | None = None, answer: str | None = None,
+                limit: int = 60, offset: int = 0, after: str | None = None,
+                before: str | None = None) -> ReviewListing:
+    """``list_review_items`` with keyset cursors (``after``/``before``) and how exact the total is."""
     states = REVIEWABLE if state == "all" else (_parse_state(state),)
     if keep not in (None, "true", "false", "null"):
         raise InvalidInput("keep must be true, false or null")
@@ -115,10 +136,18 @@ def list_review_items(session: Session, *, video_id: int | None = None, state: s
     if not 1 <= limit <= 500 or offset < 0:
         raise InvalidInput("limit must be 1..500 and offset ≥ 0")
     query = review_query(video_id=video_id, states=states, keep=keep, question=question, answer=answer)
-    total = session.scalar(select(func.count()).select_from(query.order_by(None).subquery())) or 0
-    page = session.execute(query.limit(limit).offset(offset)).all()
-    last = _last_reviews(session, [f.id for f, _ in page])
-    return [review_item(session, f, pr, last.get(f.id)) for f, pr in page], total
+    page = keyset_page(session, query, FRAME_ORDER, limit=limit, after=after, before=before, offset=offset)
+    if question is None:
+        total, exact = frame_total(session, video_id=video_id, states=states,
+                                   keep="any" if keep is None else _KEEP[keep]), True
+    else:  # no maintained count per answer: count up to a cap, and say so
+        total, exact = bounded_count(session, query, Frame.id)
+    last = _last_reviews(session, [row[0].id for row in page.rows])
+    items = [review_item(session, row[0], row[1], last.get(row[0].id)) for row in page.rows]
+    return ReviewListing(items, total, exact, page.prev, page.next)
+
+
+_KEEP = {"true": True, "false": False, "null": None}
 
 
 def _parse_state(value: str) -> FrameState:

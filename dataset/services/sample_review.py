@@ -7,10 +7,11 @@ from typing import Any
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
-from dataset.models import Annotation, Frame, FrameState, Sample, SampleState, User, Video, utcnow
+from dataset.models import Annotation, Frame, FrameState, Sample, SampleCount, SampleState, User, Video, utcnow
 from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.frames import update_frame
+from dataset.services.paging import Page, keyset_page
 
 # What curators most often find wrong with a generated sample (the reject reason picker).
 REJECT_REASONS = ("surface not flat", "mask misses the illusion", "wrong support region", "bad right view",
@@ -35,19 +36,30 @@ def sample_json(sample: Sample, frame: Frame, video: Video) -> dict[str, Any]:
 
 def list_samples(session: Session, *, state: str | None = None, flagged: bool | None = None, limit: int = 60,
                  offset: int = 0) -> tuple[list[dict[str, Any]], int]:
+    items, total, _ = samples_page(session, state=state, flagged=flagged, limit=limit, offset=offset)
+    return items, total
+
+
+def samples_page(session: Session, *, state: str | None = None, flagged: bool | None = None, limit: int = 60,
+                 offset: int = 0, after: str | None = None,
+                 before: str | None = None) -> tuple[list[dict[str, Any]], int, Page]:
+    """A page of samples by id, the total (from the maintained counts) and the keyset cursors."""
     if not 1 <= limit <= 500 or offset < 0:
         raise InvalidInput("limit must be 1..500 and offset ≥ 0")
-    query = select(Sample, Frame, Video).join(Frame, Frame.id == Sample.frame_id).join(Video, Video.id == Frame.video_id)
+    query = (select(Sample, Frame, Video, Sample.id).join(Frame, Frame.id == Sample.frame_id)
+             .join(Video, Video.id == Frame.video_id))
+    counted = select(func.coalesce(func.sum(SampleCount.n), 0))
     if state:
         try:
             query = query.where(Sample.state == SampleState(state))
         except ValueError:
             raise InvalidInput(f"state must be one of {', '.join(SampleState)}") from None
+        counted = counted.where(SampleCount.state == SampleState(state))
     if flagged is not None:
         query = query.where(Sample.flagged.is_(flagged))
-    total = session.scalar(select(func.count()).select_from(query.subquery())) or 0
-    rows = session.execute(query.order_by(Sample.id).limit(limit).offset(offset)).all()
-    return [sample_json(*row) for row in rows], total
+        counted = counted.where(SampleCount.flagged.is_(flagged))
+    page = keyset_page(session, query, (Sample.id,), limit=limit, after=after, before=before, offset=offset)
+    return [sample_json(*row[:3]) for row in page.rows], int(session.scalar(counted) or 0), page
 
 
 def get_sample(session: Session, sample_id: int) -> dict[str, Any]:

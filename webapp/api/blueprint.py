@@ -29,6 +29,11 @@ def int_arg(name: str, default: int | None = None) -> int | None:
         raise InvalidInput(f"query parameter {name!r} must be an integer") from None
 
 
+def cursor_args() -> dict[str, str | None]:
+    """The keyset cursors of a paged list (``after``/``before``, from a previous page's ``next``/``prev``)."""
+    return {"after": request.args.get("after") or None, "before": request.args.get("before") or None}
+
+
 def get_or_404(model: type[T], ident: int, what: str) -> T:
     """The row ``ident`` of ``model``, or a 404 naming the ``what``."""
     row = g.db.get(model, ident)

@@ -8,14 +8,16 @@ from flask import abort, g, request
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
 from sqlalchemy import select
+from sqlalchemy.orm import defer, joinedload
 
 from dataset.models import Job, JobState, Role, User
 from dataset.services import jobs as job_service
 from dataset.services import training
 from dataset.services import users as user_service
 from dataset.services.errors import InvalidInput, NotFound
-from dataset.services.frames import funnel_counts, list_frames, parse_state
-from webapp.api.blueprint import api, int_arg, json_body
+from dataset.services.frames import frames_page, funnel_counts, parse_state
+from dataset.services.paging import keyset_page
+from webapp.api.blueprint import api, cursor_args, int_arg, json_body
 from webapp.api.openapi import openapi_document
 from webapp.auth import requires
 from webapp.jobs import runs as run_control
@@ -54,11 +56,11 @@ def create_user() -> ResponseReturnValue:
 @requires(Role.annotator)
 def frames() -> ResponseReturnValue:
     state = request.args.get("state")
-    items, total = list_frames(
+    items, total, page = frames_page(
         g.db, video_id=int_arg("video_id"), state=parse_state(state) if state else None,
-        limit=int_arg("limit", 100) or 100, offset=int_arg("offset", 0) or 0,
+        limit=int_arg("limit", 100) or 100, offset=int_arg("offset", 0) or 0, **cursor_args(),
     )
-    return {"items": items, "total": total}
+    return {"items": items, "total": total, "prev": page.prev, "next": page.next}
 
 
 @api.get("/stats/funnel")
@@ -69,7 +71,7 @@ def funnel() -> ResponseReturnValue:
 
 def _visible_jobs() -> Any:
     """Curators and admins see every job; annotators see the jobs they launched."""
-    query = select(Job).order_by(Job.id.desc())
+    query = select(Job, Job.id).options(joinedload(Job.created_by))
     if not current_user.allows(Role.curator):
         query = query.where(Job.created_by_id == current_user.id)
     return query
@@ -78,13 +80,14 @@ def _visible_jobs() -> Any:
 @api.get("/jobs")
 @requires(Role.annotator)
 def list_jobs() -> ResponseReturnValue:
-    query = _visible_jobs()
+    query = _visible_jobs().options(defer(Job.log))  # logs can be long; the list doesn't show them
     if state := request.args.get("state"):
         if state not in JobState.__members__:
             raise InvalidInput(f"state must be one of {', '.join(JobState)}")
         query = query.where(Job.state == JobState(state))
     limit = min(max(int_arg("limit", 50) or 50, 1), 500)
-    return {"items": [job_service.job_json(j) for j in g.db.scalars(query.limit(limit))]}
+    page = keyset_page(g.db, query, (Job.id,), limit=limit, descending=True, **cursor_args())
+    return {"items": [job_service.job_json(row[0]) for row in page.rows], "prev": page.prev, "next": page.next}
 
 
 @api.get("/jobs/<int:job_id>")

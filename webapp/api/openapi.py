@@ -15,9 +15,9 @@ def _json(schema: dict[str, Any]) -> dict[str, Any]:
     return {"application/json": {"schema": schema}}
 
 
-def _list(name: str) -> dict[str, Any]:
-    """An object whose ``items`` are ``name`` schemas."""
-    return {"type": "object", "properties": {"items": {"type": "array", "items": _ref(name)}}}
+def _list(name: str, **extra: Any) -> dict[str, Any]:
+    """An object whose ``items`` are ``name`` schemas (and ``extra`` properties)."""
+    return {"type": "object", "properties": {"items": {"type": "array", "items": _ref(name)}, **extra}}
 
 
 _ERR = {"description": "error", "content": _json(_ref("Error"))}
@@ -47,6 +47,11 @@ def _q(name: str, typ: str = "integer", desc: str = "") -> dict[str, Any]:
 _ILLUSION_TYPES = [t.value for t in IllusionType]
 _JOB_ID = {"name": "job_id", "in": "path", "required": True, "schema": {"type": "integer"}}
 _SAMPLE_ID = {"name": "sample_id", "in": "path", "required": True, "schema": {"type": "integer"}}
+# Keyset paging: a page's ``next``/``prev`` cursors, sent back as after=/before= (then offset is not applied).
+_CURSORS = [_q("after", "string", "the next cursor of a page: the page after it"),
+            _q("before", "string", "the prev cursor of a page: the page before it")]
+_PAGED = {"total": {"type": "integer"}, "prev": {"type": ["string", "null"], "description": "null on the first page"},
+          "next": {"type": ["string", "null"], "description": "null on the last page"}}
 _FRAME_ID = {"name": "frame_id", "in": "path", "required": True, "schema": {"type": "integer"}}
 _RUN_ID = {"name": "run_id", "in": "path", "required": True, "schema": {"type": "integer"}}
 _CHECKPOINT = {"name": "name", "in": "path", "required": True, "schema": {"type": "string"},
@@ -68,9 +73,10 @@ def openapi_document() -> dict[str, Any]:
             },
             "/frames": {"get": _op("List frames, ordered by video and time", "annotator", schema="FrameList",
                                    params=[_q("video_id"), _q("state", "string", "ingested, prefiltered, approved, …"),
-                                           _q("limit", desc="1..10000, default 100"), _q("offset")])},
+                                           _q("limit", desc="1..10000, default 100"), _q("offset"), *_CURSORS])},
             "/videos": {
-                "get": _op("List videos with their frame counts", "annotator", schema="VideoList"),
+                "get": _op("List videos with their frame counts, newest first", "annotator", schema="VideoList",
+                           params=[_q("limit", desc="1..1000, default 500"), *_CURSORS]),
                 "post": _op("Upload a video (multipart: file, fps, source, illusion_type…); starts an ingest job",
                             "curator", body="VideoUpload", ok="202", schema="Job"),
             },
@@ -80,7 +86,8 @@ def openapi_document() -> dict[str, Any]:
                 "Frames to review with VLM answers and figures", "curator", schema="ReviewPage",
                 params=[_q("video_id"), _q("state", "string", "prefiltered (default), approved, rejected, all"),
                         _q("keep", "string", "VLM verdict: true, false, null"), _q("question", desc="1..12, with answer"),
-                        _q("answer", "string", "yes, no, unknown"), _q("limit", desc="1..500, default 60"), _q("offset")])},
+                        _q("answer", "string", "yes, no, unknown"), _q("limit", desc="1..500, default 60"), _q("offset"),
+                        *_CURSORS])},
             "/frames/{frame_id}/review": {"post": _op(
                 "Approve, reject (with a reason) or reset a frame; 409 if it changed", "curator",
                 params=[_FRAME_ID], body="ReviewDecision", schema="ReviewItem")},
@@ -106,7 +113,7 @@ def openapi_document() -> dict[str, Any]:
                                          body="BulkReview", schema="BulkResults")},
             "/samples": {"get": _op("Generated samples with QA figures", "annotator", schema="SampleList",
                                     params=[_q("state", "string", "generated, accepted, rejected"),
-                                            _q("flagged", "string", "true or false"), _q("limit"), _q("offset")])},
+                                            _q("flagged", "string", "true or false"), _q("limit"), _q("offset"), *_CURSORS])},
             "/samples/{sample_id}": {"get": _op("One sample: files, parameters, provenance, QA", "annotator",
                                                 params=[_SAMPLE_ID], schema="Sample")},
             "/samples/{sample_id}/review": {"post": _op(
@@ -116,7 +123,7 @@ def openapi_document() -> dict[str, Any]:
                                                             params=[_SAMPLE_ID], ok="202", schema="Job")},
             "/stats/funnel": {"get": _op("Pipeline funnel counts", "annotator", schema="Funnel")},
             "/jobs": {"get": _op("List jobs (annotators: their own)", "annotator", schema="JobList",
-                                 params=[_q("state", "string"), _q("limit", desc="1..500, default 50")])},
+                                 params=[_q("state", "string"), _q("limit", desc="1..500, default 50"), *_CURSORS])},
             "/jobs/{job_id}": {"get": _op("One job with its log", "annotator", params=[_JOB_ID], schema="Job")},
             "/jobs/{job_id}/retry": {"post": _op("Retry a failed or interrupted job (a training job: admins, "
                                                  "and it resumes the run)", "curator",
@@ -162,8 +169,7 @@ def openapi_document() -> dict[str, Any]:
                     "width": {"type": "integer"}, "height": {"type": "integer"}, "state": {"type": "string"},
                     "revision": {"type": "integer"}, "image": {"type": "string", "description": "media key; GET /media/{key}"},
                     "prefilter_keep": {"type": ["boolean", "null"]}}},
-                "FrameList": {"type": "object", "properties": {"items": {"type": "array", "items": _ref("Frame")},
-                                                               "total": {"type": "integer"}}},
+                "FrameList": _list("Frame", **_PAGED),
                 "Funnel": {"type": "object", "additionalProperties": {"type": "integer"}},
                 "Job": {"type": "object", "properties": {
                     "id": {"type": "integer"}, "kind": {"type": "string"},
@@ -174,7 +180,8 @@ def openapi_document() -> dict[str, Any]:
                     "video_id": {"type": "integer"}, "backend": {"enum": ["heuristic", "openai", "transformers"]},
                     "sparse": {"type": "boolean", "description": "the authors' sparse mode"}}},
                 "JobBatch": {"type": "object", "properties": {"jobs": {"type": "array", "items": _ref("Job")}}},
-                "VideoList": {"type": "object", "properties": {"items": {"type": "array", "items": {"type": "object"}}}},
+                "VideoList": {"type": "object", "properties": {"items": {"type": "array", "items": {"type": "object"}},
+                                                               "prev": _PAGED["prev"], "next": _PAGED["next"]}},
                 "VideoUpload": {"type": "object", "required": ["file"], "properties": {
                     "file": {"type": "string", "format": "binary"}, "fps": {"type": "number"},
                     "source": {"enum": ["web", "generated", "real_capture"]},
@@ -186,21 +193,21 @@ def openapi_document() -> dict[str, Any]:
                 "ReviewItem": {"allOf": [_ref("Frame"), {"type": "object", "properties": {
                     "thumb": {"type": "string"}, "prefilter": {"type": ["object", "null"]},
                     "last_review": {"type": ["object", "null"]}}}]},
-                "ReviewPage": {"type": "object", "properties": {"items": {"type": "array", "items": _ref("ReviewItem")},
-                                                                "total": {"type": "integer"}, "reasons": {"type": "array"},
-                                                                "questions": {"type": "array"}}},
+                "ReviewPage": _list("ReviewItem", **_PAGED, reasons={"type": "array"}, questions={"type": "array"},
+                                    total_exact={"type": "boolean",
+                                                 "description": "false: total is a lower bound (a question filter)"}),
                 "BulkReview": {"type": "object", "required": ["decision", "items"], "properties": {
                     "decision": {"enum": ["approve", "reject", "reset"]}, "reason": {"type": "string"},
                     "items": {"type": "array", "items": {"type": "object", "properties": {
                         "id": {"type": "integer"}, "revision": {"type": "integer"}}}}}},
                 "BulkResults": {"type": "object", "properties": {"results": {"type": "array", "items": {"type": "object"}}}},
-                "JobList": _list("Job"),
+                "JobList": _list("Job", prev=_PAGED["prev"], next=_PAGED["next"]),
                 "Sample": {"type": "object", "properties": {
                     "id": {"type": "integer"}, "frame_id": {"type": "integer"},
                     "state": {"enum": ["generated", "accepted", "rejected"]},
                     "flagged": {"type": "boolean"}, "files": {"type": "object", "description": "output name → media key"},
                     "params": {"type": "object"}, "provenance": {"type": "object"}, "qa": {"type": "object"}}},
-                "SampleList": _list("Sample"),
+                "SampleList": _list("Sample", **_PAGED),
                 "SampleDecision": {"type": "object", "required": ["decision"], "properties": {
                     "decision": {"enum": ["accept", "reject"]}, "reason": {"type": "string"}}},
                 "Lease": {"type": "object", "properties": {"frame_id": {"type": "integer"},

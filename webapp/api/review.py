@@ -10,18 +10,19 @@ from annotation.vlm import QUESTION_LABELS
 from dataset.models import Role
 from dataset.services import review as review_service
 from dataset.services.errors import Conflict, InvalidInput
-from webapp.api.blueprint import api, int_arg, json_body
+from webapp.api.blueprint import api, cursor_args, int_arg, json_body
 from webapp.auth import requires
 
 
 @api.get("/review/frames")
 @requires(Role.curator)
 def review_frames() -> ResponseReturnValue:
-    items, total = review_service.list_review_items(
+    listing = review_service.review_page(
         g.db, video_id=int_arg("video_id"), state=request.args.get("state", "prefiltered"),
         keep=request.args.get("keep") or None, question=int_arg("question"), answer=request.args.get("answer") or None,
-        limit=int_arg("limit", 60) or 60, offset=int_arg("offset", 0) or 0)
-    return {"items": items, "total": total, "reasons": list(review_service.REJECT_REASONS),
+        limit=int_arg("limit", 60) or 60, offset=int_arg("offset", 0) or 0, **cursor_args())
+    return {"items": listing.items, "total": listing.total, "total_exact": listing.total_exact,
+            "prev": listing.prev, "next": listing.next, "reasons": list(review_service.REJECT_REASONS),
             "questions": list(QUESTION_LABELS)}
 
 

@@ -9,7 +9,7 @@ from flask_login import current_user
 from dataset.models import Role, Sample, User
 from dataset.services import jobs as job_service
 from dataset.services import sample_review
-from webapp.api.blueprint import api, get_or_404, int_arg, json_body
+from webapp.api.blueprint import api, cursor_args, get_or_404, int_arg, json_body
 from webapp.auth import requires
 from webapp.runtime import runtime
 
@@ -18,11 +18,11 @@ from webapp.runtime import runtime
 @requires(Role.annotator)
 def list_samples() -> ResponseReturnValue:
     flagged = request.args.get("flagged")
-    items, total = sample_review.list_samples(
+    items, total, page = sample_review.samples_page(
         g.db, state=request.args.get("state") or None,
         flagged=None if flagged in (None, "") else flagged == "true",
-        limit=int_arg("limit", 60) or 60, offset=int_arg("offset", 0) or 0)
-    return {"items": items, "total": total}
+        limit=int_arg("limit", 60) or 60, offset=int_arg("offset", 0) or 0, **cursor_args())
+    return {"items": items, "total": total, "prev": page.prev, "next": page.next}
 
 
 @api.get("/samples/<int:sample_id>")

@@ -11,12 +11,13 @@ from sqlalchemy import func, select
 
 from annotation.vlm import BACKEND_NAMES
 from dataset.ingest.sources import VIDEO_EXTENSIONS
-from dataset.models import Frame, Role, User, Video
+from dataset.models import FrameCount, Role, User, Video
 from dataset.services import jobs as job_service
 from dataset.services.errors import InvalidInput
 from dataset.services.ingest import DEFAULT_DEDUP_HAMMING, ingest_params
+from dataset.services.paging import keyset_page
 from dataset.services.prefilter import launch_prefilter
-from webapp.api.blueprint import api, json_body
+from webapp.api.blueprint import api, cursor_args, int_arg, json_body
 from webapp.auth import requires
 from webapp.runtime import runtime
 
@@ -24,9 +25,12 @@ from webapp.runtime import runtime
 @api.get("/videos")
 @requires(Role.annotator)
 def list_videos() -> ResponseReturnValue:
-    counts = dict(g.db.execute(select(Frame.video_id, func.count()).group_by(Frame.video_id)).all())
-    videos = g.db.scalars(select(Video).order_by(Video.id.desc()))
-    return {"items": [{"id": v.id, "name": v.name, "source_kind": v.source_kind.value,
+    limit = min(max(int_arg("limit", 500) or 500, 1), 1000)
+    page = keyset_page(g.db, select(Video, Video.id), (Video.id,), limit=limit, descending=True, **cursor_args())
+    videos = [row[0] for row in page.rows]
+    counts = dict(g.db.execute(select(FrameCount.video_id, func.sum(FrameCount.n))
+                               .where(FrameCount.video_id.in_([v.id for v in videos])).group_by(FrameCount.video_id)).all())
+    return {"prev": page.prev, "next": page.next, "items": [{"id": v.id, "name": v.name, "source_kind": v.source_kind.value,
                        "illusion_types": v.illusion_types, "fps": v.fps, "width": v.width, "height": v.height,
                        "frames": counts.get(v.id, 0), "ingest": v.meta.get("ingest"),
                        "created_at": v.created_at.isoformat() + "Z"} for v in videos]}

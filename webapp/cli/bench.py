@@ -57,6 +57,31 @@ def generate_benchmark(as_json: bool, repeats: int) -> None:
     _report(run_generate_bench(repeats=repeats), as_json)
 
 
+@bench.command("scale")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@click.option("--frames", type=click.IntRange(min=1000), default=1_400_000, show_default=True,
+              help="Frames to seed (the paper curated 1.4M); the routes are also timed at a tenth of it.")
+@click.option("--database-url", default=None,
+              help="A PostgreSQL server (postgresql://user@host:port/any): the bench creates, uses and drops "
+                   "its own database there (bench_scale). SQLite is always measured.")
+@click.option("--repeats", type=click.IntRange(min=2), default=20, show_default=True, help="Timed calls per route.")
+def scale_benchmark(as_json: bool, frames: int, database_url: str | None, repeats: int) -> None:
+    """p50/p95 of every list and queue route with N frames seeded, beside the same at N/10."""
+    from webapp.benchmarks.scale import run_scale_bench
+
+    results = run_scale_bench(frames=frames, database_url=database_url, repeats=repeats)
+    if as_json:
+        click.echo(json.dumps(results))
+        return
+    for backend, figures in results["backends"].items():
+        click.echo(f"{backend}: {results['frames']} frames (seed {figures['seed_s']} s, upgrade {figures['upgrade_s']} s)")
+        tenth = figures["tenth"]["routes"]
+        for route, times in figures["routes"].items():
+            small = tenth[route]
+            click.echo(f"  {route:56} p50 {times['p50_ms']:>8} ms  p95 {times['p95_ms']:>8} ms"
+                       f"   (at {figures['tenth']['frames']}: p50 {small['p50_ms']} ms, p95 {small['p95_ms']} ms)")
+
+
 def _report(results: dict[str, object], as_json: bool) -> None:
     if as_json:
         click.echo(json.dumps(results))
