@@ -1,7 +1,7 @@
 """training runs
 
 Revision ID: 0003
-Revises: 0001 (0002 once merged)
+Revises: 0002
 Create Date: 2026-12-01 21:28:27.224773
 """
 
@@ -10,7 +10,7 @@ import sqlalchemy as sa
 
 
 revision = '0003'
-down_revision = '0001'  # the lead re-chains this to '0002' (helper scale's) on merge
+down_revision = '0002'
 branch_labels = None
 depends_on = None
 
