@@ -28,7 +28,7 @@ from dataset.db import transaction
 from dataset.models import Frame, FrameState, JobState, Role, User
 from dataset.readers import StereoSample
 from dataset.readers.base import make_regions
-from dataset.readers.version import VersionReader
+from dataset.readers.version import VersionReader, pin_dataset_version
 from dataset.services import jobs as job_service
 from dataset.services import training
 from dataset.services import users as user_service
@@ -130,7 +130,7 @@ def _run_jobs(rt: Runtime) -> None:
 def training_disparity_range(rt: Runtime) -> list[float]:
     """The 1st and 99th percentile of the accepted samples' disparities (px)."""
     with rt.sessions() as s:
-        version = training.pin_dataset_version(s, rt.media)
+        version = pin_dataset_version(s, rt.media)
     reader = VersionReader(version, rt.settings.media_root)
     values = np.concatenate([d[np.isfinite(d)] for d in (reader[i].disparity for i in range(len(reader)))])
     return _range(values)
@@ -162,14 +162,14 @@ def _train_and_score(rt: Runtime, seed: int, steps: int, test: list[StereoSample
     with transaction(rt.sessions) as s:
         admin = s.scalar(select(User).where(User.name == "bench-admin"))
         run = run_control.launch(
-            rt, s, preset="lite", overrides={**TRAIN_OVERRIDES, "train.steps": steps, "train.seed": seed},
+            rt, s, preset="lite", overrides={**TRAIN_OVERRIDES, "train.steps": steps},
             selection=training.DataSelection(), launch=training.Launch(split=training.parse_split(SPLIT), seed=seed),
             user=admin)
         run_id = run.id
     started = time.perf_counter()
     _run_jobs(rt)
     train_s = time.perf_counter() - started
-    checkpoint = training.run_dir(rt.settings, run_id) / "checkpoints" / "best.pt"
+    checkpoint = training.run_dir(rt.settings.runs_dir, run_id) / "checkpoints" / "best.pt"
     methods = build_methods(list(METHODS), checkpoint=checkpoint, predictions=None, mono_dir=None)
     report = evaluate(test, methods, EvalOptions(regions=REGIONS))
     if report["failed"]:
