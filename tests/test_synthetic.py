@@ -268,3 +268,11 @@ def test_dataset_is_byte_identical_across_runs(tmp_path: Path) -> None:
     write_synthetic_dataset(tmp_path / "b", **kwargs)
     assert [p.name for p in first] == ["synthetic-0007", "synthetic-0008"]
     assert _digests(tmp_path / "a") == _digests(tmp_path / "b")
+
+
+def test_the_baseline_scales_every_disparity() -> None:
+    near = render_video(3, n_frames=1, width=64, height=36)
+    far = render_video(3, n_frames=1, width=64, height=36, baseline_m=0.05)
+    for name in ("disparity", "mono_disparity", "stereo_disparity"):
+        np.testing.assert_allclose(getattr(far.frames[0], name), 0.5 * getattr(near.frames[0], name), rtol=1e-5)
+    assert far.baseline_m == 0.05

@@ -22,19 +22,21 @@ APPROVE_PER_VIDEO = 6
 ANNOTATE_PER_VIDEO = 3
 
 
-def seed_reviews_and_annotations(session: Session, media: MediaStore, curator: User, annotator: User) -> list[int]:
-    """Approve the first frames of each synthetic video and annotate the first of those from their
-    true masks (submitted, so generation follows). Returns the annotated frame ids; idempotent."""
+def seed_reviews_and_annotations(session: Session, media: MediaStore, curator: User, annotator: User, *,
+                                 approve: int = APPROVE_PER_VIDEO, annotate: int = ANNOTATE_PER_VIDEO) -> list[int]:
+    """Approve the first ``approve`` frames of each synthetic video and annotate the first ``annotate``
+    of those from their true masks (submitted, so generation follows). Returns the annotated frame
+    ids; idempotent."""
     annotated = []
     for video in session.scalars(select(Video).order_by(Video.id)):
         if not video.meta.get("synthetic"):
             continue
         frames = session.scalars(select(Frame).where(Frame.video_id == video.id).order_by(Frame.index)
-                                 .limit(APPROVE_PER_VIDEO)).all()
+                                 .limit(approve)).all()
         for n, frame in enumerate(frames):
             if frame.state == FrameState.prefiltered:
                 review_frame(session, frame.id, curator, "approve")
-            if n < ANNOTATE_PER_VIDEO and frame.state == FrameState.approved:
+            if n < annotate and frame.state == FrameState.approved:
                 save_annotation(session, frame.id, annotator, version=0, regions=_true_regions(media, frame),
                                 illusion_type=video.meta["pairs"][0]["illusion_type"], submit=True)
                 annotated.append(frame.id)

@@ -123,12 +123,15 @@ def intrinsics(width: int, height: int) -> tuple[float, float, float]:
 
 
 def render_video(seed: int, n_frames: int = 12, width: int = 640,
-                 height: int = 360) -> SyntheticVideo:
+                 height: int = 360, baseline_m: float = BASELINE_M) -> SyntheticVideo:
     """Render ``n_frames`` frames (at FPS) of the synthetic room for ``seed``; deterministic.
 
     Pair 0 is the picture, pair 1 the mirror. The scene depends on ``seed`` only; the size
-    only scales the view (see :func:`intrinsics`).
+    only scales the view (see :func:`intrinsics`); ``baseline_m`` (metres) scales every
+    disparity, e.g. to bring a test set into a model's training range.
     """
+    if not baseline_m > 0:
+        raise ValueError(f"baseline must be positive, got {baseline_m} m")
     if n_frames < 1 or width < 16 or height < 16:
         raise ValueError(f"need n_frames >= 1 and a size of at least 16x16, got "
                          f"{n_frames} frames of {width}x{height}")
@@ -140,8 +143,8 @@ def render_video(seed: int, n_frames: int = 12, width: int = 640,
         time_s = index / FPS
         center, rotation = layout.trajectory.pose(time_s)
         left = View(center, rotation, f, cx, cy)
-        right = View(center + BASELINE_M * rotation[:, 0], rotation, f, cx, cy)
-        disparity, mono, stereo, regions = _render_maps(layout, left, width, height, BASELINE_M)
+        right = View(center + baseline_m * rotation[:, 0], rotation, f, cx, cy)
+        disparity, mono, stereo, regions = _render_maps(layout, left, width, height, baseline_m)
         frames.append(SyntheticFrame(
             index=index,
             time_s=time_s,
@@ -153,4 +156,4 @@ def render_video(seed: int, n_frames: int = 12, width: int = 640,
             regions=regions,
         ))
     return SyntheticVideo(name=f"synthetic-{seed:04d}", seed=seed, fps=FPS, fx=f, fy=f, cx=cx,
-                          cy=cy, baseline_m=BASELINE_M, frames=frames)
+                          cy=cy, baseline_m=baseline_m, frames=frames)

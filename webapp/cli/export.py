@@ -1,36 +1,20 @@
-"""`illusion-studio export …` and `illusion-studio import …`: dataset folders in and out, as jobs.
-
-Like every long step they are jobs (a row with progress and log, listed by `jobs list`). By
-default the job is queued for a worker; `--wait` also waits for it with a progress bar, and
-`--here` runs it in this process at once, so no worker is needed (what a one-machine user wants
-for a folder on this machine: a queued job runs on whichever machine's worker takes it).
-"""
+"""`illusion-studio export …` and `illusion-studio import …`: dataset folders in and out, as jobs
+(queued, ``--wait`` or ``--here``: see :mod:`webapp.cli.running`)."""
 
 from __future__ import annotations
 
-import threading
 from pathlib import Path
-from typing import Any
 
 import click
 
-from dataset.db import transaction
-from dataset.export import FORMATS, HANDLERS, export_params, import_params
+from dataset.export import FORMATS, export_params, import_params
 from dataset.export.authors_layout import MASK_FORMATS
 from dataset.export.selection import DEFAULT_STATES
 from dataset.export.splits import DEFAULT_SPLIT
 from dataset.models import SampleState
-from dataset.services import jobs as job_service
 from webapp.cli.errors import service_errors
-from webapp.cli.ingest import wait_for_jobs
+from webapp.cli.running import run_job, run_options
 from webapp.cli.state import CliState, pass_state
-
-
-def run_options(command: Any) -> Any:
-    """``--wait`` and ``--here``, shared by both commands."""
-    command = click.option("--here", is_flag=True,
-                           help="Run the job in this process now (no worker needed), showing progress.")(command)
-    return click.option("--wait", is_flag=True, help="Queue the job for a worker and wait for it, showing progress.")(command)
 
 
 @click.command("export")
@@ -54,7 +38,7 @@ def export_cmd(state: CliState, out: Path, fmt: str, split: str, seed: int, stat
     with service_errors():
         params = export_params(out, format=fmt, split=split, seed=seed, states=states or DEFAULT_STATES,
                                video_ids=video_ids, overwrite=overwrite, mask_format=mask_format)
-    _run(state, "export", params, f"export {fmt} → {params['out']}", wait=wait, here=here)
+    run_job(state, "export", params, f"export {fmt} → {params['out']}", wait=wait, here=here)
 
 
 @click.command("import")
@@ -68,22 +52,4 @@ def import_cmd(state: CliState, path: Path, fmt: str, wait: bool, here: bool) ->
     (importing again adds nothing)."""
     with service_errors():
         params = import_params(path, format=fmt)
-    _run(state, "import", params, f"import {fmt} ← {params['path']}", wait=wait, here=here)
-
-
-def _run(state: CliState, kind: str, params: dict[str, Any], what: str, *, wait: bool, here: bool) -> None:
-    rt = state.runtime
-    with transaction(rt.sessions) as s:
-        # --here skips the queue: the row alone records the job, and this process runs it.
-        job_id = (job_service.create_job(s, kind, params, None) if here else rt.submit(s, kind, params, None)).id
-    click.echo(f"job {job_id}: {what}")
-    if here:
-        runner = threading.Thread(target=job_service.execute_job, args=(job_id, {kind: HANDLERS[kind]}, rt),
-                                  name=f"{kind}-job-{job_id}", daemon=True)
-        runner.start()
-        wait_for_jobs(state, [job_id])
-        runner.join()  # the row is final already; Ctrl-C leaves it running, and the reaper marks it interrupted
-    elif wait:
-        wait_for_jobs(state, [job_id])
-    else:
-        click.echo("queued for a worker (`illusion-studio worker`); --here runs it in this process", err=True)
+    run_job(state, "import", params, f"import {fmt} ← {params['path']}", wait=wait, here=here)

@@ -53,8 +53,9 @@ def ingest(state: CliState, paths: tuple[Path, ...], fps: float, source: str | N
         wait_for_jobs(state, job_ids)
 
 
-def wait_for_jobs(state: CliState, job_ids: list[int]) -> None:
-    """Show one progress bar over ``job_ids`` until all finish; a failure is reported and exits 1."""
+def wait_for_jobs(state: CliState, job_ids: list[int], *, quiet: bool = False) -> None:
+    """Show one progress bar over ``job_ids`` until all finish; a failure is reported and exits 1.
+    ``quiet`` writes the closing lines to stderr, keeping stdout for a command's ``--json``."""
     started = time.monotonic()
     hinted = False
     with click.progressbar(length=1000, label="working", file=sys.stderr, show_eta=False) as bar:
@@ -72,7 +73,7 @@ def wait_for_jobs(state: CliState, job_ids: list[int]) -> None:
             time.sleep(0.25)
     failed = [j for j in jobs if j.state.value != "succeeded"]
     for job in jobs:
-        click.echo(f"job {job.id}: {job.state.value} {json.dumps(job.result) if job.result else job.error or ''}")
+        click.echo(f"job {job.id}: {job.state.value} {json.dumps(job.result) if job.result else job.error or ''}", err=quiet)
     if failed:
         raise click.ClickException(f"{len(failed)} of {len(jobs)} jobs did not succeed: "
                                    + "; ".join(f"job {j.id}: {j.error}" for j in failed))

@@ -1,0 +1,187 @@
+"""The methods an evaluation compares, each a disparity predictor over :class:`StereoSample`s.
+
+``fusion``, ``stereo`` and ``mono_align`` share one forward pass of a fusion checkpoint per
+sample; ``mono_gt_align`` and ``sgbm`` need no network (torch loads only when a network method is
+asked for); ``predictions`` reads another program's PFMs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dataset.formats import read_pfm
+from dataset.geometry.consistency import sgbm_disparity
+from dataset.readers import SampleError, StereoSample
+from dataset.readers.base import resize_disparity, resize_image
+from model.align import AlignRule, align
+
+METHODS = ("fusion", "stereo", "mono_align", "mono_gt_align", "sgbm", "predictions")
+NETWORK_METHODS = ("fusion", "stereo", "mono_align")
+
+
+def method_key(name: str) -> str:
+    """CLI spelling (``mono-gt-align``) to the key used in reports (``mono_gt_align``)."""
+    key = name.strip().lower().replace("-", "_")
+    if key not in METHODS:
+        raise ValueError(f"unknown method {name!r}; choose from {', '.join(m.replace('_', '-') for m in METHODS)}")
+    return key
+
+
+def resize_relative(mono: np.ndarray, height: int, width: int) -> np.ndarray:
+    """A relative (affine-invariant) disparity at another size: values are kept, not scaled."""
+    mono = np.nan_to_num(np.asarray(mono, np.float32))
+    return mono if mono.shape == (height, width) else resize_image(mono, (height, width))
+
+
+def fill_holes(disparity: np.ndarray) -> np.ndarray:
+    """Fill NaN pixels of each row with the smaller of the nearest valid disparities to their left
+    and right (occlusions belong to the background, as the KITTI devkit's interpolation assumes);
+    a row without any valid pixel becomes 0. Dense output, float32 HxW."""
+    valid = np.isfinite(disparity)
+    h, w = disparity.shape
+    cols = np.arange(w)
+    left_idx = np.maximum.accumulate(np.where(valid, cols, -1), axis=1)
+    right_idx = np.minimum.accumulate(np.where(valid, cols, w)[:, ::-1], axis=1)[:, ::-1]
+    padded = np.concatenate([np.where(valid, disparity, np.inf), np.full((h, 1), np.inf)], axis=1)
+    rows = np.arange(h)[:, None]
+    from_left = np.where(left_idx >= 0, padded[rows, np.maximum(left_idx, 0)], np.inf)
+    from_right = np.where(right_idx < w, padded[rows, np.minimum(right_idx, w)], np.inf)
+    filled = np.minimum(from_left, from_right)
+    return np.where(np.isfinite(filled), filled, 0).astype(np.float32)
+
+
+def sgbm_max_disparity(width: int) -> int:
+    """SGBM's search range from the image width alone (a quarter of it, a multiple of 16): no ground
+    truth is ever looked at."""
+    return max(16, int(np.ceil(width / 4 / 16)) * 16)
+
+
+@dataclass(frozen=True)
+class SgbmParams:
+    """The baseline's parameters, printed in every report."""
+
+    max_disparity: int | None = None  # None: :func:`sgbm_max_disparity` of each image
+    block_size: int = 5
+    hole_fill: str = "row-wise minimum of the nearest valid neighbours; 0 where a row has none"
+
+
+class Mono:
+    """Where a sample's monocular disparity comes from: the dataset, or ``--mono DIR``
+    (``DIR/<sample path>.pfm``, any size; values kept, since they are affine-invariant)."""
+
+    def __init__(self, directory: Path | None) -> None:
+        self.directory = directory
+
+    def __call__(self, sample: StereoSample) -> np.ndarray:
+        h, w = sample.disparity.shape
+        if self.directory is not None:
+            path = prediction_path(self.directory, sample)
+            if not path.is_file():
+                raise SampleError(f"no monocular disparity {path}")
+            return resize_relative(read_pfm(path), h, w)
+        if sample.mono is None:
+            raise SampleError("this dataset carries no monocular disparity: pass --mono DIR")
+        return resize_relative(sample.mono, h, w)
+
+
+def prediction_path(directory: Path, sample: StereoSample) -> Path:
+    """``DIR/REL/x.pfm`` for the sample whose left image is ``REL/x.png`` in its dataset."""
+    rel = Path(str(sample.meta.get("left") or sample.name))
+    if rel.is_absolute() or ".." in rel.parts:
+        raise SampleError(f"sample path {rel} is not relative to the dataset")
+    return directory / rel.with_suffix(".pfm")
+
+
+class NetworkRuns:
+    """One forward pass of a fusion checkpoint per sample, shared by fusion, stereo and mono_align."""
+
+    def __init__(self, checkpoint: Path, device: str, mono: Mono, iters: int | None) -> None:
+        from model.checkpoint import load_network
+        from model.predictor import Predictor
+
+        network, config, _payload = load_network(checkpoint, device)
+        self.predictor = Predictor(network, config, device)
+        self.config = config
+        self.mono, self.iters = mono, iters
+        self._last: tuple[str, Any] | None = None
+
+    def __call__(self, sample: StereoSample) -> Any:
+        if self._last is None or self._last[0] != sample.name:
+            try:
+                mono = self.mono(sample)
+            except SampleError:
+                mono = None  # a mono backend that estimates its own input does not need one
+            try:
+                prediction = self.predictor.predict(sample.left, sample.right, mono, iters=self.iters, seed=0)
+            except ValueError as exc:
+                raise SampleError(str(exc)) from None
+            self._last = (sample.name, prediction)
+        return self._last[1]
+
+
+Predict = Callable[[StereoSample], np.ndarray]
+
+
+def build_methods(names: list[str], *, checkpoint: Path | None, predictions: Path | None, mono_dir: Path | None,
+                  align_rule: AlignRule = "lsq", sgbm: SgbmParams = SgbmParams(), device: str = "cpu",
+                  iters: int | None = None) -> dict[str, Predict]:
+    """The predictors for ``names`` (report keys), each StereoSample → float32 HxW pixels at the
+    sample's resolution. Raises ValueError naming what a method needs and was not given."""
+    mono = Mono(mono_dir)
+    methods: dict[str, Predict] = {}
+    runs: NetworkRuns | None = None
+    if any(n in NETWORK_METHODS for n in names):
+        if checkpoint is None:
+            raise ValueError("fusion, stereo and mono-align need a checkpoint (--checkpoint, or promote a run)")
+        runs = NetworkRuns(checkpoint, device, mono, iters)
+    for name in names:
+        if name == "fusion":
+            methods[name] = lambda s, r=runs: r(s).disparity
+        elif name == "stereo":
+            methods[name] = lambda s, r=runs: r(s).stereo
+        elif name == "mono_align":
+            methods[name] = lambda s, r=runs: r(s).mono_align
+        elif name == "mono_gt_align":
+            methods[name] = lambda s: _gt_aligned(s, mono(s), align_rule)
+        elif name == "sgbm":
+            methods[name] = lambda s: _sgbm(s, sgbm)
+        elif name == "predictions":
+            if predictions is None:
+                raise ValueError("the predictions method needs --predictions DIR")
+            methods[name] = lambda s, d=predictions: _read_prediction(d, s)
+        else:
+            raise ValueError(f"unknown method {name!r}")
+    return methods
+
+
+def _gt_aligned(sample: StereoSample, mono: np.ndarray, rule: AlignRule) -> np.ndarray:
+    region = sample.regions.get("non_illusion", sample.regions["all"])
+    mask = region & np.isfinite(sample.disparity)
+    if not mask.any():
+        raise SampleError("no valid non-illusion pixel to align the monocular disparity on")
+    return align(mono, sample.disparity, mask, rule)
+
+
+def _sgbm(sample: StereoSample, params: SgbmParams) -> np.ndarray:
+    max_disparity = params.max_disparity or sgbm_max_disparity(sample.left.shape[1])
+    raw = sgbm_disparity(sample.left, sample.right, max_disparity, block_size=params.block_size)
+    return fill_holes(raw)
+
+
+def _read_prediction(directory: Path, sample: StereoSample) -> np.ndarray:
+    path = prediction_path(directory, sample)
+    if not path.is_file():
+        raise SampleError(f"no prediction {path}")
+    try:
+        disparity = read_pfm(path)
+    except ValueError as exc:
+        raise SampleError(str(exc)) from None
+    if disparity.ndim != 2:
+        raise SampleError(f"{path}: expected a single-channel disparity, got shape {disparity.shape}")
+    h, w = sample.disparity.shape
+    return resize_disparity(disparity, (h, w))

@@ -1,0 +1,194 @@
+"""The synthetic illusion benchmark: the paper's protocol in miniature, with exact ground truth.
+
+Training data, made by the product itself: (a) synthetic videos ingested, approved, annotated from
+their true masks, generated and accepted — as ``demo`` does — and (b) rendered stereo pairs of
+other seeds imported as captures, whose raytraced right views show stereo fooled by mirrors (the
+generated samples never do: their right views are warped from the rectified disparity). A short
+``lite`` run trains on them through the real training job. The test set is rendered pairs of yet
+other seeds, never seen in training or validation, rendered with a baseline that brings their
+disparities into the training range, with their mono-fooled disparity as the monocular input.
+Every method is scored densely over the same valid pixels.
+
+Preparing the data is cached in the work folder and timed apart from training.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from sqlalchemy import select
+
+from dataset.capture.synthetic import import_rendered_video
+from dataset.db import transaction
+from dataset.models import Frame, FrameState, JobState, Role, User
+from dataset.readers import StereoSample
+from dataset.readers.base import make_regions
+from dataset.readers.version import VersionReader, pin_dataset_version
+from dataset.services import jobs as job_service
+from dataset.services import training
+from dataset.services import users as user_service
+from dataset.services.demo import accept_generated_samples, seed_reviews_and_annotations
+from dataset.services.ingest import ingest_params
+from dataset.services.review import review_frame
+from dataset.services.sample_review import review_sample
+from dataset.synthetic import render_video, write_synthetic_dataset
+from dataset.synthetic.layout import BASELINE_M
+from model.evaluate import EvalOptions, evaluate
+from model.methods import build_methods
+from webapp.cli.workspace import init_workspace
+from webapp.jobs import runs as run_control
+from webapp.jobs.handlers import HANDLERS
+from webapp.runtime import Runtime
+
+SIZE = (320, 192)  # W x H of every rendered frame
+FRAMES = 6  # per video
+GENERATED_VIDEOS = 6  # seeds 0..5 through the pipeline
+RENDERED_SEEDS = tuple(range(40, 46))  # imported as captures
+TEST_SEEDS = tuple(range(100, 104))  # held out: never in training or validation
+METHODS = ("fusion", "stereo", "mono_gt_align", "sgbm")
+REGIONS = ("all", "picture", "mirror", "non_illusion")
+TRAIN_OVERRIDES: dict[str, Any] = {"train.batch_size": 2, "train.crop": (160, 288), "train.val_every": 200,
+                                   "train.checkpoint_every": 200}
+DEFAULT_STEPS = 1500
+SPLIT = "train=0.85,val=0.15"
+
+
+def run_fusion_bench(work_dir: Path, *, seeds: int = 1, steps: int = DEFAULT_STEPS) -> dict[str, Any]:
+    """Prepare (or reuse) the data in ``work_dir``, train ``seeds`` runs and score every method on
+    the held-out test pairs. Returns per method and region the mean (and spread over seeds) of EPE
+    and bad-2, the disparity ranges of training and test, and the timings."""
+    started = time.perf_counter()
+    rt, cached = prepared_workspace(work_dir / "workspace")
+    prepare_s = time.perf_counter() - started
+    train_range = training_disparity_range(rt)
+    test, baseline = test_samples(train_range)
+    test_range = _range(np.concatenate([s.disparity[np.isfinite(s.disparity)] for s in test]))
+    runs = []
+    for seed in range(seeds):
+        runs.append(_train_and_score(rt, seed, steps, test))
+    rt.close()
+    return {
+        "methods": _aggregate([r["methods"] for r in runs]),
+        "seeds": seeds, "steps": steps, "preset": "lite", "size": f"{SIZE[0]}x{SIZE[1]}",
+        "train_disparity_px": train_range, "test_disparity_px": test_range, "test_baseline_m": round(baseline, 4),
+        "test_samples": len(test), "test_seeds": list(TEST_SEEDS),
+        "prepare_s": round(prepare_s, 1), "prepare_cached": cached,
+        "train_s": [r["train_s"] for r in runs], "runs": [r["run"] for r in runs],
+    }
+
+
+def prepared_workspace(home: Path) -> tuple[Runtime, bool]:
+    """The benchmark's workspace: every synthetic frame generated and accepted, and the rendered
+    captures imported and accepted. Built once; a later call finds ``prepared.json`` and reuses it."""
+    marker = home / "prepared.json"
+    recipe = {"size": SIZE, "frames": FRAMES, "generated": GENERATED_VIDEOS, "rendered": RENDERED_SEEDS}
+    cached = marker.is_file() and json.loads(marker.read_text()) == json.loads(json.dumps(recipe))
+    settings = init_workspace(home)
+    rt = Runtime(settings)
+    if cached:
+        return rt, True
+    with transaction(rt.sessions) as s:
+        users = {role: s.scalar(select(User).where(User.name == f"bench-{role.value}"))
+                 or user_service.create_user(s, f"bench-{role.value}", role, f"bench-{role.value}-password")
+                 for role in Role}
+        user_ids = {role: u.id for role, u in users.items()}
+    videos = write_synthetic_dataset(home / "synthetic", videos=GENERATED_VIDEOS, seed=0, n_frames=FRAMES,
+                                     width=SIZE[0], height=SIZE[1])
+    with transaction(rt.sessions) as s:
+        for path in videos:
+            rt.submit(s, "ingest", ingest_params(str(path), dedup_hamming=None, prefilter=True), None)
+    _run_jobs(rt)
+    with transaction(rt.sessions) as s:
+        curator, annotator = s.get(User, user_ids[Role.curator]), s.get(User, user_ids[Role.annotator])
+        # Every frame joins, whatever the prefilter said: the benchmark measures the model, not the filter.
+        for frame_id in s.scalars(select(Frame.id).where(Frame.state.in_((FrameState.prefiltered, FrameState.rejected)))):
+            review_frame(s, frame_id, curator, "approve")
+        for frame_id in seed_reviews_and_annotations(s, rt.media, curator, annotator, approve=FRAMES, annotate=FRAMES):
+            rt.submit(s, "generate", {"frame_id": frame_id}, annotator)
+    _run_jobs(rt)
+    with transaction(rt.sessions) as s:
+        curator = s.get(User, user_ids[Role.curator])
+        accept_generated_samples(s, curator)
+        for seed in RENDERED_SEEDS:
+            for sample_id in import_rendered_video(s, rt.media, render_video(seed, FRAMES, *SIZE)):
+                review_sample(s, sample_id, curator, "accept")
+    marker.write_text(json.dumps(recipe))
+    return rt, False
+
+
+def _run_jobs(rt: Runtime) -> None:
+    failed = [job_id for job_id, state in job_service.run_queued_jobs(HANDLERS, rt) if state != JobState.succeeded]
+    if failed:
+        raise RuntimeError(f"benchmark preparation: jobs {failed} did not succeed (`illusion-studio jobs show ID`)")
+
+
+def training_disparity_range(rt: Runtime) -> list[float]:
+    """The 1st and 99th percentile of the accepted samples' disparities (px)."""
+    with rt.sessions() as s:
+        version = pin_dataset_version(s, rt.media)
+    reader = VersionReader(version, rt.settings.media_root)
+    values = np.concatenate([d[np.isfinite(d)] for d in (reader[i].disparity for i in range(len(reader)))])
+    return _range(values)
+
+
+def _range(values: np.ndarray) -> list[float]:
+    return [round(float(np.percentile(values, 1)), 2), round(float(np.percentile(values, 99)), 2)]
+
+
+def test_samples(train_range: list[float]) -> tuple[list[StereoSample], float]:
+    """The held-out rendered pairs, at a baseline putting their 99th percentile disparity at the
+    training one's; regions all / picture / mirror / non_illusion; mono = the mono-fooled disparity."""
+    probe = render_video(TEST_SEEDS[0], 1, *SIZE)
+    baseline = BASELINE_M * train_range[1] / float(np.percentile(probe.frames[0].disparity, 99))
+    samples = []
+    for seed in TEST_SEEDS:
+        video = render_video(seed, FRAMES, *SIZE, baseline_m=baseline)
+        for frame in video.frames:
+            masks = {pair.illusion_type: pair.illusion for pair in frame.regions}
+            illusion = np.logical_or.reduce(list(masks.values()))
+            samples.append(StereoSample(
+                name=f"{video.name}/{frame.index:04d}", left=frame.left, right=frame.right,
+                disparity=frame.disparity, regions=make_regions(frame.disparity, {**masks, "non_illusion": ~illusion}),
+                mono=frame.mono_disparity, meta={"seed": seed}))
+    return samples, baseline
+
+
+def _train_and_score(rt: Runtime, seed: int, steps: int, test: list[StereoSample]) -> dict[str, Any]:
+    with transaction(rt.sessions) as s:
+        admin = s.scalar(select(User).where(User.name == "bench-admin"))
+        run = run_control.launch(
+            rt, s, preset="lite", overrides={**TRAIN_OVERRIDES, "train.steps": steps},
+            selection=training.DataSelection(), launch=training.Launch(split=training.parse_split(SPLIT), seed=seed),
+            user=admin)
+        run_id = run.id
+    started = time.perf_counter()
+    _run_jobs(rt)
+    train_s = time.perf_counter() - started
+    checkpoint = training.run_dir(rt.settings.runs_dir, run_id) / "checkpoints" / "best.pt"
+    methods = build_methods(list(METHODS), checkpoint=checkpoint, predictions=None, mono_dir=None)
+    report = evaluate(test, methods, EvalOptions(regions=REGIONS))
+    if report["failed"]:
+        raise RuntimeError(f"benchmark evaluation failed on {report['failed'][:3]}")
+    figures = {m: {r: {k: d["regions"][r][k] for k in ("epe", "bad2")} for r in REGIONS}
+               for m, d in report["methods"].items()}
+    return {"run": run_id, "train_s": round(train_s, 1), "methods": figures}
+
+
+def _aggregate(per_seed: list[dict[str, Any]]) -> dict[str, Any]:
+    """Mean over seeds of each figure, with the spread (population standard deviation) beside it."""
+    out: dict[str, Any] = {}
+    for method in per_seed[0]:
+        out[method] = {}
+        for region in per_seed[0][method]:
+            out[method][region] = {}
+            for key in per_seed[0][method][region]:
+                values = [run[method][region][key] for run in per_seed]
+                out[method][region][key] = round(statistics.fmean(values), 3)
+                if len(values) > 1:
+                    out[method][region][f"{key}_spread"] = round(statistics.pstdev(values), 3)
+    return out

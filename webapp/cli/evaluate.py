@@ -1,0 +1,82 @@
+"""`illusion-studio evaluate …`: the paper's tables for any methods on a dataset folder or on a
+training run's held-out test split, as a job (queued, ``--wait`` or ``--here``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from dataset.models import Job
+from dataset.readers import READER_FORMATS
+from model.align import ALIGN_RULES
+from model.evaluate import RESOLUTIONS
+from model.evaluation import DEFAULT_METHODS, evaluation_params
+from model.methods import METHODS
+from model.registry import current_checkpoint
+from webapp.cli.errors import service_errors
+from webapp.cli.running import run_job, run_options
+from webapp.cli.state import CliState, pass_state
+
+METHOD_CHOICES = [m.replace("_", "-") for m in METHODS] + list(METHODS)
+
+
+@click.command("evaluate")
+@click.option("--data", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              help="A dataset folder; without it, the test split of --run (or of the checkpoint's run).")
+@click.option("--format", "fmt", type=click.Choice(READER_FORMATS), help="The layout of --data.")
+@click.option("--method", "methods", multiple=True, type=click.Choice(METHOD_CHOICES),
+              help=f"Repeatable (default: {', '.join(m.replace('_', '-') for m in DEFAULT_METHODS)}).")
+@click.option("--checkpoint", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="A fusion checkpoint (default: the workspace's current model).")
+@click.option("--run", "run_id", type=int, help="A training run whose test split to evaluate on.")
+@click.option("--predictions", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              help="PFMs of another program: DIR/REL/x.pfm for left image REL/x.png (any resolution).")
+@click.option("--mono", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              help="Monocular disparities as PFMs laid out like --predictions, for datasets that carry none.")
+@click.option("--resolution", type=click.Choice(list(RESOLUTIONS)),
+              help="Images and ground truth resized (disparity scaled); default full, quarter for booster.")
+@click.option("--align", "align_rule", type=click.Choice(ALIGN_RULES), default="lsq", show_default=True,
+              help="mono-gt-align: least squares, or the authors' median / mean-absolute-deviation.")
+@click.option("--max-disparity", type=click.IntRange(min=1), help="sgbm's search range (default: a quarter of the width).")
+@click.option("--iters", type=click.IntRange(min=1), help="GRU iterations (default: the checkpoint's test iterations).")
+@click.option("--min-disparity", type=float, help="booster: ground truth below this is invalid (the authors' script: 1).")
+@click.option("--kitti-png", is_flag=True, help="Also write predictions as KITTI uint16 PNGs (disparity × 256).")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              help="Report folder (default: <data dir>/evaluations/<job id>).")
+@click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object (with --wait/--here).")
+@run_options
+@pass_state
+def evaluate_cmd(state: CliState, data: Path | None, fmt: str | None, methods: tuple[str, ...],
+                 checkpoint: Path | None, run_id: int | None, predictions: Path | None, mono: Path | None,
+                 resolution: str | None, align_rule: str, max_disparity: int | None, iters: int | None,
+                 min_disparity: float | None, kitti_png: bool, out: Path | None, as_json: bool,
+                 wait: bool, here: bool) -> None:
+    """Evaluate METHODs: EPE and bad-x (and depth metrics where a camera is known) per region."""
+    if data is not None and fmt is None:
+        raise click.UsageError("--data needs --format")
+    settings = state.settings
+    needs_network = any(m.replace("-", "_") in ("fusion", "stereo", "mono_align")
+                        for m in (methods or DEFAULT_METHODS))
+    if checkpoint is None and needs_network:
+        checkpoint = current_checkpoint(settings)
+    run_dir = settings.home / "runs" / str(run_id) if run_id is not None else None
+    with service_errors():
+        try:
+            params = evaluation_params(
+                data=data, format=fmt, methods=list(methods), out=out, checkpoint=checkpoint,
+                predictions=predictions, mono=mono, resolution=resolution, align=align_rule,
+                max_disparity=max_disparity, kitti_png=kitti_png, iters=iters, run_dir=run_dir,
+                reader_options={"min_disparity": min_disparity} if min_disparity is not None else None)
+        except ValueError as exc:
+            raise click.ClickException(str(exc)) from None
+    job_id = run_job(state, "evaluate", params,
+                     f"evaluate {', '.join(params['methods'])} on {params['data'] or 'the test split'}",
+                     wait=wait, here=here, quiet=as_json)
+    if wait or here:
+        with state.runtime.sessions() as s:
+            report_dir = Path(s.get(Job, job_id).result["out"])
+        if as_json:
+            click.echo((report_dir / "report.json").read_text())
+        else:
+            click.echo(f"report: {report_dir / 'index.html'}")
