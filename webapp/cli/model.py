@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from dataset.formats import FormatError, read_rgb, write_pfm, write_rgb
+from dataset.formats import FormatError, read_map, read_rgb, write_pfm, write_rgb
 from dataset.preview.images import add_colorbar, colorize, value_range
 from model.registry import current_checkpoint
 from webapp.cli.state import CliState, pass_state
@@ -49,11 +49,8 @@ def predict(state: CliState, left: Path, right: Path, checkpoint: Path | None, o
             raise click.ClickException(_NO_MODEL)
     try:
         left_rgb, right_rgb = read_rgb(left), read_rgb(right)
-        mono_map = None
-        if mono is not None:
-            from annotation.depth import load_precomputed
-
-            mono_map = load_precomputed(mono)
+        # a relative disparity: the PNG encoding's scale does not matter, it is affine-invariant
+        mono_map = read_map(mono, png="authors") if mono is not None else None
     except FormatError as exc:
         raise click.ClickException(str(exc)) from None
     from model.checkpoint import load_network
