@@ -3,6 +3,7 @@ and migration 0002 — checked against the queries they replace, on both databas
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import pytest
@@ -278,3 +279,19 @@ def test_prefilter_claims_the_backlog_in_keyed_pages(sessions, monkeypatch: pyte
             assert [len(s.get(Job, j.id).params["frame_ids"]) for j in jobs][:-1] == [2] * (len(jobs) - 1)
         owners = dict(s.execute(select(Frame.id, Frame.prefilter_job_id).where(Frame.state == FrameState.ingested)).all())
         assert all(owners[fid] == job.id for job in jobs for fid in s.get(Job, job.id).params["frame_ids"])
+
+
+@pytest.mark.slow
+def test_bench_scale_reports_every_route_at_both_sizes(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from click.testing import CliRunner
+
+    from webapp.cli import main
+
+    result = CliRunner().invoke(main, ["bench", "scale", "--frames", "2000", "--repeats", "2", "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.output)
+    sqlite = report["backends"]["sqlite"]
+    assert report["frames"] == 2000 and sqlite["tenth"]["frames"] == 1000
+    assert sqlite["counts"]["frame"] == 2000 and sqlite["counts"]["sample"] > 0
+    assert set(sqlite["routes"]) == set(sqlite["tenth"]["routes"]) and len(sqlite["routes"]) >= 20
+    assert all(0 < t["p50_ms"] <= t["p95_ms"] for t in sqlite["routes"].values())
