@@ -10,6 +10,7 @@ import time
 from typing import Any
 
 from dataset.db import transaction
+from dataset.models import Job
 from dataset.services import training
 from dataset.services.errors import InvalidInput, ServiceError
 from dataset.services.jobs import JobContext
@@ -43,8 +44,8 @@ def train_job(ctx: JobContext) -> dict[str, Any]:
         run = training.start_attempt(s, run_id, ctx.job_id)
         launch, offset = dict(run.launch), run.progress_offset
     command = torchrun_command(directory, launch, watch_pid=os.getpid())
-    ctx.log(f"run {run_id}: {' '.join(command)}")
     group = ProcessGroup(command, env_extra=device_env(launch.get("devices", "auto")))
+    ctx.log(f"run {run_id}: trainers in process group {group.pgid}: {' '.join(command)}")
     end, offset, cancelled = None, offset, False
     while True:
         code = group.poll()
@@ -82,6 +83,9 @@ def _mirror(ctx: JobContext, run_id: int, directory: Any, offset: int,
         run.progress_offset = offset
         step, steps, cancel = run.step, run.steps, run.cancel_requested
         eta, loss = run.eta_s, run.loss
+        if events:  # the job row carries the live figures; the handler's return value replaces them at the end
+            s.get(Job, ctx.job_id).result = {"run": run_id, "step": step, "steps": steps, "loss": loss, "lr": run.lr,
+                                             "samples_per_s": run.samples_per_s, "eta_s": eta}
     message = None
     if events and steps:
         message = f"step {step}/{steps}" + (f" loss {loss:.4g}" if loss is not None else "") + \

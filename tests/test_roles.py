@@ -59,9 +59,21 @@ EXPECTED: dict[str, Role | None] = {
     "api.get_sample": Role.annotator,
     "api.review_sample": Role.curator,
     "api.regenerate_sample": Role.curator,
+    "models.runs": Role.curator,
+    "models.run": Role.curator,
+    "models.compare": Role.curator,
+    "models.val_image": Role.curator,
+    "api.list_runs": Role.curator,
+    "api.launch_run": Role.admin,
+    "api.get_run": Role.curator,
+    "api.run_metrics": Role.curator,
+    "api.cancel_run": Role.admin,
+    "api.resume_run": Role.admin,
+    "api.promote_run": Role.admin,
+    "api.download_checkpoint": Role.curator,
 }
 SAMPLE_ARGS = {"job_id": "1", "frame_id": "1", "sample_id": "1", "view": "anaglyph", "asset": "index.html",
-               "key": "ab/cd/" + "ab" * 32 + ".png"}
+               "key": "ab/cd/" + "ab" * 32 + ".png", "run_id": "1", "name": "best.pt"}
 CALLERS = ["anonymous", *(r.value for r in Role)]
 
 

@@ -55,19 +55,20 @@ def rt(queue_settings: Settings) -> Iterator[Runtime]:
     runtime = Runtime(queue_settings)
     yield runtime
     if queue_settings.queue_url:
-        runtime.queue.huey.flush()
+        for huey in runtime.queue.hueys.values():
+            huey.flush()
     runtime.close()
 
 
 @pytest.fixture
-def start_worker(queue_settings: Settings) -> Iterator[Callable[[], subprocess.Popen[str]]]:
-    """Start a real `illusion-studio worker` process and return once it listens for jobs;
+def start_worker(queue_settings: Settings) -> Iterator[Callable[..., subprocess.Popen[str]]]:
+    """Start a real `illusion-studio worker [ARGS…]` process and return once it listens for jobs;
     all are stopped after the test."""
     procs: list[subprocess.Popen[str]] = []
 
-    def start() -> subprocess.Popen[str]:
+    def start(*args: str) -> subprocess.Popen[str]:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "webapp.cli", "--data-dir", str(queue_settings.home), "worker"],
+            [sys.executable, "-m", "webapp.cli", "--data-dir", str(queue_settings.home), "worker", *args],
             cwd=ROOT, env={**os.environ, "PYTHONUNBUFFERED": "1"},
             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         procs.append(proc)

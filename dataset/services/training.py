@@ -12,7 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import re
-from collections import Counter, defaultdict
+from collections import defaultdict
 from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -26,7 +26,7 @@ from dataset.export.splits import parse_split_spec, split_of
 from dataset.media import MediaStore
 from dataset.models import IllusionType, JobState, RunState, TrainingMetric, TrainingRun, User, utcnow
 from dataset.readers import READER_FORMATS, open_reader
-from dataset.readers.version import pin_dataset_version, split_by_video, version_media_keys
+from dataset.readers.version import pin_dataset_version, split_by_video, version_counts, version_media_keys
 from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 
@@ -147,7 +147,8 @@ def _pin_folder(selection: DataSelection) -> dict[str, Any]:
     digest = hashlib.sha256(json.dumps([selection.format, names]).encode()).hexdigest()
     return {"id": digest, "created_at": utcnow().isoformat() + "Z",
             "filters": {"format": selection.format, "root": selection.root},
-            "items": [{"name": n, "video_id": _folder_group(n), "kind": "synthesized"} for n in names]}
+            "items": [{"name": n, "video_id": _folder_group(n), "kind": "synthesized", "illusion_types": []}
+                      for n in names]}
 
 
 def _is_folder(version: dict[str, Any]) -> bool:
@@ -235,15 +236,19 @@ def run_of_job(session: Session, job_id: int) -> int | None:
 
 
 def effective_state(run: TrainingRun) -> RunState:
-    """The run's state, with a lost worker shown: the reaper marks the job, not the run."""
-    if run.state in (RunState.queued, RunState.running) and run.job is not None \
-            and run.job.state == JobState.interrupted:
-        return RunState.interrupted
+    """The run's state, with a lost worker or a crashed job shown: the reaper (or the job's
+    failure) marks the job, not the run."""
+    if run.state in (RunState.queued, RunState.running) and run.job is not None:
+        if run.job.state == JobState.interrupted:
+            return RunState.interrupted
+        if run.job.state == JobState.failed:
+            return RunState.failed
     return run.state
 
 
 def kind_counts(version: dict[str, Any]) -> dict[str, int]:
-    counts = Counter(item.get("kind", "synthesized") for item in version.get("items", []))
+    """Samples of each kind (synthesized, capture) in a version."""
+    counts = version_counts(version) if version.get("items") else {}
     return {kind: counts.get(kind, 0) for kind in SAMPLE_KINDS}
 
 
@@ -266,8 +271,10 @@ def run_json(run: TrainingRun, runs_dir: Path, *, current: dict[str, Any] | None
     last = directory / run.last_checkpoint if run.last_checkpoint else None
     best = directory / "checkpoints" / "best.pt"
     duration = ((run.finished_at or utcnow()) - run.started_at).total_seconds() if run.started_at else None
+    state = effective_state(run)
+    reason = run.reason or (run.job.error if state != run.state and run.job is not None else None)
     data: dict[str, Any] = {
-        "run": run.id, "job": run.job_id, "state": effective_state(run).value, "preset": run.preset,
+        "run": run.id, "job": run.job_id, "state": state.value, "preset": run.preset,
         "step": run.step, "steps": run.steps or run.config.get("train", {}).get("steps", 0),
         "progress": (run.step / run.steps) if run.steps else 0.0,
         "checkpoint": str(last) if last is not None and last.is_file() else None,
@@ -275,7 +282,7 @@ def run_json(run: TrainingRun, runs_dir: Path, *, current: dict[str, Any] | None
         "resumed_from_step": run.resumed_from_step, "world_size": run.world_size,
         "loss": run.loss, "lr": run.lr, "samples_per_s": run.samples_per_s, "eta_s": run.eta_s,
         "best_val_epe": run.best_val_epe, "best_step": run.best_step, "last_val": run.last_val or None,
-        "reason": run.reason, "cancel_requested": run.cancel_requested,
+        "reason": reason, "cancel_requested": run.cancel_requested,
         "dataset": {"id": run.dataset_id, "samples": len(run.dataset.get("items", [])),
                     "kinds": kind_counts(run.dataset), "filters": run.dataset.get("filters", {}),
                     "splits": {name: len(ids) for name, ids in run.splits.items()}},

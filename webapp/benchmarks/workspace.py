@@ -1,4 +1,4 @@
-"""A scratch workspace holding one approved frame of a synthetic scene, for benchmarks."""
+"""Scratch workspaces for benchmarks: one approved frame of a synthetic scene, or accepted samples."""
 
 from __future__ import annotations
 
@@ -8,10 +8,12 @@ from typing import Any
 from sqlalchemy import select, update
 
 from dataset.db import migrate, transaction
-from dataset.models import Frame, FrameState
+from dataset.models import Frame, FrameState, Sample, User
 from dataset.services import jobs as job_service
 from dataset.services import users as user_service
+from dataset.services.demo import seed_reviews_and_annotations
 from dataset.services.ingest import ingest_params
+from dataset.services.sample_review import review_sample
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime
 from webapp.settings import load_settings
@@ -31,3 +33,27 @@ def approved_frame_workspace(home: Path, scene: Path, **settings: Any) -> tuple[
         frame_id = s.scalar(select(Frame.id).order_by(Frame.index))
         user_id = user_service.create_user(s, "bench", "annotator", "bench-password").id
     return rt, frame_id, user_id
+
+
+def accepted_samples_workspace(home: Path, scenes: list[Path]) -> Runtime:
+    """A workspace in ``home`` with ``scenes`` ingested, the demo's head start of reviews and
+    annotations, their samples generated and accepted by a curator (as the real jobs do)."""
+    home.mkdir(parents=True)
+    rt = Runtime(load_settings(home))
+    migrate(rt.settings.database_url)
+    with transaction(rt.sessions) as s:
+        for scene in scenes:
+            rt.submit(s, "ingest", ingest_params(str(scene), fps=None, dedup_hamming=None), None)
+    job_service.run_queued_jobs(HANDLERS, rt)
+    with transaction(rt.sessions) as s:
+        s.execute(update(Frame).values(state=FrameState.prefiltered))
+        curator = user_service.create_user(s, "bench-curator", "curator", "bench-password")
+        annotator = user_service.create_user(s, "bench-annotator", "annotator", "bench-password")
+        for frame_id in seed_reviews_and_annotations(s, rt.media, curator, annotator):
+            rt.submit(s, "generate", {"frame_id": frame_id}, None)
+    job_service.run_queued_jobs(HANDLERS, rt)
+    with transaction(rt.sessions) as s:
+        curator = s.scalar(select(User).where(User.name == "bench-curator"))
+        for sample_id in s.scalars(select(Sample.id).order_by(Sample.id)).all():
+            review_sample(s, sample_id, curator, "accept")
+    return rt

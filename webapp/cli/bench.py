@@ -82,6 +82,16 @@ def scale_benchmark(as_json: bool, frames: int, database_url: str | None, repeat
                        f"   (at {figures['tenth']['frames']}: p50 {small['p50_ms']} ms, p95 {small['p95_ms']} ms)")
 
 
+@bench.command("train")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@click.option("--steps", type=click.IntRange(min=2), default=8, show_default=True, help="Timed steps per process count.")
+def train_benchmark(as_json: bool, steps: int) -> None:
+    """Training samples/s of the lite preset at its crop with 1 and 2 processes (gloo DDP on CPU)."""
+    from webapp.benchmarks.train import run_train_bench
+
+    _report(run_train_bench(steps=steps), as_json)
+
+
 def _report(results: dict[str, object], as_json: bool) -> None:
     if as_json:
         click.echo(json.dumps(results))

@@ -1,0 +1,12 @@
+"""The training engine: ``torchrun -m model.train RUN_DIR`` (or ``python -m model.train RUN_DIR``).
+
+Torch-free at import, so the product can read the exit codes without loading torch.
+"""
+
+EXIT_SUCCEEDED = 0
+EXIT_FAILED = 1  # an exception: bad run.json, unreadable data, a crash (the end event says which)
+EXIT_USAGE = 2  # bad command line (argparse's own code)
+EXIT_DIVERGED = 3  # a non-finite loss; the last good checkpoint stays
+EXIT_ORPHANED = 4  # the watched process (--watch-pid) is gone
+
+EXIT_CODES = {"succeeded": EXIT_SUCCEEDED, "failed": EXIT_FAILED, "diverged": EXIT_DIVERGED}

@@ -1,0 +1,55 @@
+"""``torchrun [--nproc-per-node N] -m model.train RUN_DIR [--watch-pid PID]``, or without torchrun
+``python -m model.train RUN_DIR`` (one process). Exit codes: see ``model/train/__init__.py``."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import traceback
+from pathlib import Path
+
+from model.train import EXIT_CODES, EXIT_FAILED, EXIT_ORPHANED
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m model.train", description="Train the fusion model of RUN_DIR/run.json.")
+    parser.add_argument("run_dir", type=Path, help="The run directory (run.json in it; everything the run writes goes there).")
+    parser.add_argument("--watch-pid", type=int, metavar="PID", help="Exit within seconds once this process is gone.")
+    args = parser.parse_args(argv)
+    if args.watch_pid is not None:
+        from model.train.watch import watch_pid
+
+        # os._exit: the main thread may sit in a collective or a forward pass; nothing else is safe.
+        watch_pid(args.watch_pid, lambda: os._exit(EXIT_ORPHANED))
+    if not args.run_dir.is_dir():
+        print(f"{args.run_dir}: no such run directory", file=sys.stderr)
+        return EXIT_FAILED
+    # Heavy imports after the watch starts, so even a trainer still loading torch stops in time.
+    from model.train.dist import close_world, init_world
+    from model.train.events import append_event
+    from model.train.loop import Trainer
+    from model.train.spec import read_run
+
+    world = trainer = None
+    try:
+        spec = read_run(args.run_dir)
+        world = init_world(spec.device)
+        trainer = Trainer(spec, world)
+        outcome = trainer.run()
+        return EXIT_CODES[outcome.state]
+    except Exception as exc:  # the run failed: say why in one line, keep the traceback in the log
+        traceback.print_exc()
+        reason = f"{type(exc).__name__}: {exc}".splitlines()[0]
+        # Any rank may fail; the failing one reports (the others are stopped by torchrun).
+        append_event(args.run_dir, {"event": "end", "state": "failed", "reason": reason,
+                                    "step": None if trainer is None else trainer.step,
+                                    "rank": 0 if world is None else world.rank})
+        return EXIT_FAILED
+    finally:
+        if world is not None:
+            close_world(world)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,109 @@
+"""The run's checkpoint folder: names, the newest one, pruning (last k, best, keep.json), and the
+process RNG states a checkpoint carries so that a resumed run continues bit for bit.
+
+A checkpoint is ``model.checkpoint.save_checkpoint``'s file; the engine's state rides in its
+``extra`` (see ``model/train/loop.py``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import re
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+CHECKPOINT_DIR = "checkpoints"
+BEST_NAME = "best.pt"
+KEEP_FILE = "keep.json"
+_STEP_NAME = re.compile(r"^step_(\d{7,})\.pt$")
+
+
+def step_path(run_dir: Path, step: int) -> Path:
+    return run_dir / CHECKPOINT_DIR / f"step_{step:07d}.pt"
+
+
+def best_path(run_dir: Path) -> Path:
+    return run_dir / CHECKPOINT_DIR / BEST_NAME
+
+
+def step_checkpoints(run_dir: Path) -> list[tuple[int, Path]]:
+    """The run's ``step_XXXXXXX.pt`` files as (step, path), oldest first."""
+    folder = run_dir / CHECKPOINT_DIR
+    if not folder.is_dir():
+        return []
+    found = [(int(m.group(1)), p) for p in folder.iterdir() if (m := _STEP_NAME.match(p.name))]
+    return sorted(found)
+
+
+def kept_by_product(run_dir: Path) -> set[Path] | None:
+    """The resolved paths ``keep.json`` lists (relative ones from RUN_DIR); None when the file
+    exists but cannot be read, which means: delete nothing."""
+    path = run_dir / KEEP_FILE
+    if not path.exists():
+        return set()
+    try:
+        listed = json.loads(path.read_text())["paths"]
+        return {(run_dir / p).resolve() for p in listed}
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def prune(run_dir: Path, keep_last: int) -> list[Path]:
+    """Delete step checkpoints older than the newest ``keep_last``, sparing best.pt and whatever
+    keep.json lists; returns what was deleted."""
+    kept = kept_by_product(run_dir)
+    if kept is None:
+        return []
+    old = step_checkpoints(run_dir)[:-keep_last] if keep_last > 0 else step_checkpoints(run_dir)
+    removed = []
+    for _, path in old:
+        if path.resolve() not in kept:
+            path.unlink(missing_ok=True)
+            removed.append(path)
+    return removed
+
+
+def copy_atomic(source: Path, target: Path) -> None:
+    """``target`` becomes a copy of ``source``; readers see the old file or the whole new one."""
+    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
+    os.close(fd)
+    try:
+        shutil.copyfile(source, tmp)
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, target)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def rng_state() -> dict[str, Any]:
+    """This process's torch (CPU and CUDA), numpy and Python RNG states."""
+    state: dict[str, Any] = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
+    if torch.cuda.is_available() and torch.cuda.is_initialized():
+        state["cuda"] = torch.cuda.get_rng_state_all()
+    return state
+
+
+def restore_rng(state: dict[str, Any]) -> None:
+    """Put back what :func:`rng_state` took."""
+    torch.set_rng_state(state["torch"])
+    np.random.set_state(state["numpy"])
+    random.setstate(state["python"])
+    if "cuda" in state and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(state["cuda"])
+
+
+def seed_everything(seed: int) -> None:
+    """Seed torch, numpy and Python alike on every rank (the explicit per-sample generators carry
+    the data's randomness; this covers anything inside the network that draws on its own)."""
+    torch.manual_seed(seed)
+    np.random.seed(seed % 2**32)
+    random.seed(seed)

@@ -1,0 +1,73 @@
+"""``RUN_DIR/run.json``: what the product asks the engine to train (MODEL_API.md, "Training engine")."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from model.presets import Config
+
+RUN_FILE = "run.json"
+SPLITS = ("train", "val", "test")
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """A parsed run.json. ``splits`` hold sample ids (database) or reader sample names (folders)."""
+
+    run_dir: Path
+    config: Config
+    data_format: str  # "database" or one of dataset.readers.READER_FORMATS
+    data_root: Path | None  # the folder of a non-database format
+    data_options: dict[str, Any]  # keyword options of open_reader
+    dataset: dict[str, Any] | None  # the pinned dataset version (database)
+    splits: dict[str, list[Any]]
+    media_root: Path | None
+    init_checkpoint: Path | None
+    device: str | None  # "cpu", "cuda", "cuda:N"; None: CUDA when available
+    workers: int  # DataLoader worker processes per rank
+
+    @property
+    def dataset_version(self) -> str | None:
+        """The pinned version's id (sha256 of its items), None for folder data."""
+        return None if self.dataset is None else self.dataset.get("id")
+
+
+def read_run(run_dir: Path) -> RunSpec:
+    """Parse ``run_dir/run.json``; ValueError naming the field on bad input."""
+    path = run_dir / RUN_FILE
+    try:
+        raw = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ValueError(f"{path}: no run.json in the run directory") from None
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: not JSON ({exc})") from None
+    if not isinstance(raw, dict) or "config" not in raw:
+        raise ValueError(f"{path}: expected an object with a 'config'")
+    config = Config.from_dict(raw["config"])
+    data = raw.get("data") or {"format": "database"}
+    fmt = data.get("format", "database")
+    splits = raw.get("splits") or {}
+    unknown = set(splits) - set(SPLITS)
+    if unknown:
+        raise ValueError(f"{path}: unknown split(s) {', '.join(sorted(unknown))}; expected {', '.join(SPLITS)}")
+    if not splits.get("train"):
+        raise ValueError(f"{path}: splits.train is empty: nothing to train on")
+    if fmt == "database":
+        if not isinstance(raw.get("dataset"), dict) or not raw.get("media_root"):
+            raise ValueError(f"{path}: data.format 'database' needs 'dataset' (a pinned version) and 'media_root'")
+    elif not data.get("root"):
+        raise ValueError(f"{path}: data.format {fmt!r} needs data.root (the folder)")
+    workers = raw.get("workers", 0)
+    if not isinstance(workers, int) or workers < 0:
+        raise ValueError(f"{path}: workers must be a non-negative integer, not {workers!r}")
+    return RunSpec(
+        run_dir=run_dir, config=config, data_format=fmt,
+        data_root=Path(data["root"]) if data.get("root") else None, data_options=dict(data.get("options") or {}),
+        dataset=raw.get("dataset"), splits={name: list(splits.get(name) or []) for name in SPLITS},
+        media_root=Path(raw["media_root"]) if raw.get("media_root") else None,
+        init_checkpoint=Path(raw["init_checkpoint"]) if raw.get("init_checkpoint") else None,
+        device=raw.get("device"), workers=workers,
+    )

@@ -1,0 +1,105 @@
+"""The Models page in a real browser: an admin launches a short run and watches its chart grow;
+an annotator cannot launch."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+import urllib.request
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from dataset.db import migrate, transaction
+from dataset.models import Role
+from dataset.services import users as user_service
+from tests.browser import ROOT, free_port, login
+from tests.conftest import PASSWORD, make_settings
+from tests.runs_data import add_accepted_samples
+from webapp.runtime import Runtime
+
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    """A workspace with one user per role and accepted samples of three videos; its server and a train worker."""
+    settings = make_settings(tmp_path_factory.mktemp("models") / "ws")
+    migrate(settings.database_url)
+    rt = Runtime(settings)
+    with transaction(rt.sessions) as s:
+        for role in Role:
+            user_service.create_user(s, role.value, role, PASSWORD)
+        add_accepted_samples(s, rt.media, videos=3)
+    rt.close()
+    port = free_port()
+    env = {k: v for k, v in os.environ.items() if not k.startswith("ILLUSION_STUDIO_")}
+    cli = [sys.executable, "-m", "webapp.cli", "--data-dir", str(settings.home)]
+    procs = [subprocess.Popen([*cli, "serve", "--port", str(port)], cwd=ROOT, env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL),
+             subprocess.Popen([*cli, "worker", "--queue", "train"], cwd=ROOT, env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    url = f"http://127.0.0.1:{port}"
+    try:
+        deadline = time.monotonic() + 60
+        while True:
+            try:
+                with urllib.request.urlopen(f"{url}/healthz", timeout=2):
+                    break
+            except OSError:
+                assert time.monotonic() < deadline, "server did not come up"
+                time.sleep(0.3)
+        yield url
+    finally:
+        for proc in procs:
+            proc.terminate()
+        for proc in procs:
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+
+
+def test_admin_launches_a_run_and_sees_its_chart_grow(browser, server: str, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    page = browser.new_page()
+    login(page, server, "admin", PASSWORD)
+    page.click("[data-nav=models]")
+    page.wait_for_selector("#runs tbody td:has-text('No runs yet.')")
+    form = page.locator("#launch")
+    form.locator("[name=steps]").fill("12")
+    form.locator("[name=batch]").fill("2")
+    form.locator("[name=crop]").fill("32x64")
+    form.locator("[name=iters]").fill("2")
+    form.locator("[name=devices]").fill("cpu")
+    form.locator("button[type=submit]").click()
+    page.wait_for_url(f"{server}/models/runs/*")
+    points = "Number(document.querySelector('#charts svg[aria-label=\"training loss\"]').dataset.points || 0)"
+    page.wait_for_function(f"{points} > 0", timeout=180_000)
+    first = page.evaluate(points)
+    page.wait_for_function(f"{points} > {first} || document.getElementById('run').dataset.state === 'succeeded'",
+                           timeout=180_000)
+    page.wait_for_function("document.getElementById('run').dataset.state === 'succeeded'", timeout=180_000)
+    assert page.evaluate(points) > first, "the chart never grew while the run went"
+    assert page.locator("#fig-step").inner_text() == "12/12"
+    assert page.locator("#checkpoints tbody a").count() >= 1
+    page.screenshot(path=str(tmp_path / "run.png"), full_page=True)
+    page.click("#run-promote")
+    page.wait_for_selector("#run-current:not([hidden])")
+    page.close()
+
+
+def test_an_annotator_cannot_launch(browser, server: str) -> None:  # type: ignore[no-untyped-def]
+    page = browser.new_page()
+    login(page, server, "annotator", PASSWORD)
+    assert page.locator("[data-nav=models]").count() == 0
+    assert page.goto(f"{server}/models").status == 403
+    status = page.evaluate("""async () => {
+        const csrf = document.querySelector('meta[name="csrf-token"]').content;
+        const r = await fetch('/api/v1/runs', {method: 'POST', headers: {'Content-Type': 'application/json',
+                                                'X-CSRFToken': csrf}, body: JSON.stringify({steps: 2})});
+        return r.status; }""")
+    assert status == 403
+    page.close()
