@@ -6,7 +6,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from sqlalchemy import Select, and_, func, select
+from sqlalchemy import ColumnElement, Select, and_, func, select
 from sqlalchemy.orm import Session
 
 from dataset.models import Frame, FrameState, PrefilterResult, Review, ReviewDecision, User
@@ -90,7 +90,7 @@ def review_query(*, video_id: int | None, states: Sequence[FrameState], keep: st
     """
     query = (select(Frame, PrefilterResult, *FRAME_ORDER)
              .outerjoin(PrefilterResult, PrefilterResult.id == Frame.prefilter_result_id)
-             .where(Frame.state.in_(states)))
+             .where(_in_states(states)))
     if video_id is not None:
         query = query.where(Frame.video_id == video_id)
     if keep is not None:
@@ -99,6 +99,14 @@ def review_query(*, video_id: int | None, states: Sequence[FrameState], keep: st
         value = PrefilterResult.answers[question - 1].as_boolean()  # a JSON path on SQLite and PostgreSQL alike
         query = query.where(value.is_(None) if answer == "unknown" else value == (answer == "yes"))
     return query.order_by(*FRAME_ORDER)
+
+
+def _in_states(states: Sequence[FrameState]) -> ColumnElement[bool]:
+    if len(states) == 1:
+        return Frame.state == states[0]
+    # Several states as NOT IN the others: with IN, both planners gather every match from the state
+    # index and sort it (seconds at 1.4M frames); this walks (video_id, index) in order and stops.
+    return Frame.state.not_in([s for s in FrameState if s not in states])
 
 
 @dataclass(frozen=True)

@@ -122,13 +122,12 @@ def seed(conn: Connection, n: int, seed_value: int = 0) -> dict[str, Any]:
     names, shares = zip(*_STATES, strict=True)
     ids = {"frame": 0, "result": 0, "review": 0, "annotation": 0, "sample": 0, "job": 0}
     counts = dict.fromkeys(ids, 0)
-    videos = max(n // FRAMES_PER_VIDEO, 1)
+    videos = -(-n // FRAMES_PER_VIDEO)
     for first in range(0, videos, CHUNK_VIDEOS):
         rows: dict[str, list[tuple[Any, ...]]] = {t: [] for t in ("videos", "frames", "prefilter_results", "reviews",
                                                                     "annotations", "samples", "jobs")}
         for v in range(first, min(first + CHUNK_VIDEOS, videos)):
-            _seed_video(rng, v, min(FRAMES_PER_VIDEO, n - v * FRAMES_PER_VIDEO) if v == videos - 1 else FRAMES_PER_VIDEO,
-                        names, shares, ids, rows)
+            _seed_video(rng, v, min(FRAMES_PER_VIDEO, n - v * FRAMES_PER_VIDEO), names, shares, ids, rows)
         for table, values in rows.items():
             _bulk(conn, table, _COLUMNS[table], values)
     for key in counts:
