@@ -121,6 +121,25 @@ def test_annotator_clicks_pairs_submits_and_a_second_annotator_works_alongside(b
         draft = page.request.get(f"{url}/api/v1/frames/{frame['id']}").json()
         assert [r["kind"] for r in draft["regions"]] == ["illusion"] and not draft["submitted"]
 
+        # correcting it: a right-click on the picture's edge takes a piece off, a click on the wall adds
+        # one; each sends the previous mask along and gets a new one back, with no error on the page
+        ys, xs = np.nonzero(picture)
+        row = int(np.median(ys))
+        inside = np.flatnonzero(picture[row])
+        for point, button, grows in (((int(inside[3]), row), "right", False),
+                                     ((int(inside[0]) - 6, row), "left", True)):
+            before = page.evaluate("window.annotator.pairs[0].illusion")
+            click_image(page, *point, button=button)
+            page.wait_for_function("([before]) => window.annotator.pairs[0].illusion !== before"
+                                   " || document.getElementById('status').dataset.kind === 'error'",
+                                   arg=[before], timeout=10_000)
+            expect(page.locator("#message")).not_to_contain_text("failed")
+            after_area = page.evaluate("window.annotator.pairs[0].illusion")
+            assert (after_area > before) if grows else (0 < after_area < before), (button, before, after_area)
+            page.keyboard.press("Control+z")  # back to the first mask for what follows
+            page.wait_for_function("([before]) => window.annotator.pairs[0].illusion === before", arg=[before])
+        page.wait_for_function("!window.annotator.dirty", timeout=10_000)
+
         # its support: the wall band around the picture
         page.keyboard.press("s")
         band = truth(home, frame["index"], "support_00")

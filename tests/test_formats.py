@@ -27,6 +27,7 @@ from dataset.formats import (
     write_ply,
     write_scale_factors,
 )
+from dataset.formats.masks import cv_mask
 
 
 @pytest.mark.parametrize("little_endian", [True, False])
@@ -122,6 +123,16 @@ def test_masks_are_lossless_png(tmp_path: Path) -> None:
         write_mask(tmp_path / "mask.jpg", mask)
     with pytest.raises(FormatError, match="bool"):
         write_mask(path, mask.astype(np.uint8))
+
+
+def test_cv_mask_gives_opencv_the_layout_it_writes_into() -> None:
+    column_major = np.asfortranarray(np.eye(6, 9, dtype=bool))  # how pycocotools decodes RLE
+    canvas = cv_mask(column_major)
+    assert canvas.flags.c_contiguous and canvas.dtype == np.uint8 and set(np.unique(canvas)) == {0, 1}
+    cv2.circle(canvas, (4, 4), 2, 1, -1)  # OpenCV 5 refuses to draw into column-major arrays
+    assert canvas[4, 4] == 1
+    soft = cv_mask(column_major, np.float32)
+    assert soft.flags.c_contiguous and soft.dtype == np.float32 and soft.sum() == 6
 
 
 def test_authors_jpeg_masks_threshold_at_128(tmp_path: Path) -> None:

@@ -22,7 +22,8 @@ masks = st.tuples(st.integers(1, 40), st.integers(1, 40)).flatmap(
 def test_round_trip_and_pycocotools_agree(mask: np.ndarray) -> None:
     rle = mask_to_rle(mask)
     assert rle["size"] == list(mask.shape) and isinstance(rle["counts"], str)
-    assert np.array_equal(rle_to_mask(rle), mask)
+    decoded = rle_to_mask(rle)
+    assert np.array_equal(decoded, mask) and decoded.flags.c_contiguous  # OpenCV 5 takes C order only
     coded = {"size": rle["size"], "counts": rle["counts"].encode()}
     assert np.array_equal(coco_mask.decode(coded).astype(bool), mask)
     assert int(coco_mask.area(coded)) == int(mask.sum())

@@ -41,9 +41,8 @@ def _tiny_parts() -> dict:
                                          num_attention_heads=2, iou_head_hidden_dim=32))
 
 
-@pytest.fixture(scope="module")
-def video_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A saved tiny Sam2VideoModel (serves clicks and propagation)."""
+def save_tiny_video_model(path: Path) -> Path:
+    """Save a tiny randomly initialised Sam2VideoModel (serves clicks and propagation) to ``path``."""
     torch.manual_seed(0)
     config = transformers.Sam2VideoConfig(
         **_tiny_parts(), image_size=SIZE, num_maskmem=2, max_object_pointers_in_encoder=2,
@@ -52,9 +51,13 @@ def video_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
         memory_attention_rope_feat_sizes=[SIZE // 16, SIZE // 16], memory_encoder_hidden_size=128,
         memory_encoder_output_channels=64, mask_downsampler_embed_dim=128,
         memory_fuser_embed_dim=128, memory_fuser_intermediate_dim=64)
-    path = tmp_path_factory.mktemp("sam2-video-tiny")
     transformers.Sam2VideoModel(config).save_pretrained(path)
     return path
+
+
+@pytest.fixture(scope="module")
+def video_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return save_tiny_video_model(tmp_path_factory.mktemp("sam2-video-tiny"))
 
 
 @pytest.fixture(scope="module")

@@ -15,6 +15,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from annotation.images import rgb_image
+from dataset.formats.masks import cv_mask
 
 Box = tuple[float, float, float, float]  # (x0, y0, x1, y1), full-resolution pixels
 Progress = Callable[[float], None]  # called with the fraction done, 0..1
@@ -114,11 +115,11 @@ def check_image(image: np.ndarray) -> np.ndarray:
 
 
 def check_mask(mask: np.ndarray, height: int, width: int, what: str = "mask") -> np.ndarray:
-    """``mask`` as a bool (height, width) array; SegmentError on another shape."""
+    """``mask`` as a C-contiguous bool (height, width) array; SegmentError on another shape."""
     mask = np.asarray(mask)
     if mask.shape != (height, width):
         raise SegmentError(f"{what} is {mask.shape}, the image is {(height, width)}")
-    return mask.astype(bool, copy=False)
+    return cv_mask(mask, bool)
 
 
 def check_prompt(embedding: Embedding, model_id: str, points: np.ndarray, labels: np.ndarray,

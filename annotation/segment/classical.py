@@ -39,6 +39,7 @@ from annotation.segment.base import (
 )
 from annotation.segment.propagate import flow_propagate
 from annotation.segment.refine import disk, resize_mask, snap_to_edges
+from dataset.formats.masks import cv_mask
 
 WORK_LONG_SIDE = 800  # px; thin frames (a few px at 1280 wide) must survive the downscale
 _BLUR_SIGMA = 1.0  # working px; damps texture before the gradient
@@ -177,17 +178,17 @@ class _Work:
         if not len(prompt.points) or not prev.any():
             return
         kernel = disk(_KEEP_MARGIN)
-        inside = cv2.erode(prev.astype(np.uint8), kernel, borderValue=1) > 0
-        outside = cv2.erode((~prev).astype(np.uint8), kernel, borderValue=1) > 0
+        inside = cv2.erode(cv_mask(prev), kernel, borderValue=1) > 0
+        outside = cv2.erode(cv_mask(~prev), kernel, borderValue=1) > 0
         (cx, cy), label = self.to_work(prompt.points[-1:])[0], prompt.labels[-1]
-        wrong_side = (prev if label == 0 else ~prev).astype(np.uint8)
+        wrong_side = cv_mask(prev if label == 0 else ~prev)
         # the colour-flood of the click within the side it corrects
         flood = np.pad(1 - wrong_side, 1)
         cv2.floodFill(self.image.copy(), flood, (int(cx), int(cy)), (0, 0, 0),
                       (_FLOOD_TOLERANCE,) * 3, (_FLOOD_TOLERANCE,) * 3,
                       4 | cv2.FLOODFILL_MASK_ONLY | (2 << 8))
         free = (flood[1:-1, 1:-1] == 2).astype(np.uint8)
-        _, _, bw, bh = cv2.boundingRect(prev.astype(np.uint8))
+        _, _, bw, bh = cv2.boundingRect(cv_mask(prev))
         reach = np.zeros_like(free)
         cv2.circle(reach, (int(cx), int(cy)), int(_FLOOD_REACH * np.hypot(bw, bh)) + 1, 1, -1)
         free &= reach
@@ -215,13 +216,13 @@ class _Work:
         obj = (cut == cv2.GC_FGD) | (cut == cv2.GC_PR_FGD)
         obj = resize_mask(obj, ry1 - ry0, rx1 - rx0)
         out = np.zeros((h, w), bool)
-        out[ry0:ry1, rx0:rx1] = cv2.erode(obj.astype(np.uint8), disk(_KEEP_MARGIN)) > 0
+        out[ry0:ry1, rx0:rx1] = cv2.erode(cv_mask(obj), disk(_KEEP_MARGIN)) > 0
         return out
 
     def edge_support(self, mask: np.ndarray) -> float:
         """Score in [0, 1]: how strong the image edges under the mask's boundary are, relative
         to the image's strong edges (90th percentile of the gradient)."""
-        m = mask.astype(np.uint8)
+        m = cv_mask(mask)
         boundary = (m - cv2.erode(m, disk(1), borderValue=1)) > 0
         if not boundary.any():
             return 0.0
@@ -239,7 +240,7 @@ def _gradient(image: np.ndarray) -> np.ndarray:
 
 def _fill_holes(mask: np.ndarray) -> np.ndarray:
     """``mask`` with every background region not touching the border filled."""
-    outside = np.pad(~mask, 1).astype(np.uint8)
+    outside = cv_mask(np.pad(~mask, 1))
     flood = np.zeros((outside.shape[0] + 2, outside.shape[1] + 2), np.uint8)
     cv2.floodFill(outside, flood, (0, 0), 2)
     return (outside[1:-1, 1:-1] != 2)

@@ -14,6 +14,7 @@ import numpy as np
 
 from annotation.segment.base import Progress
 from annotation.segment.refine import snap_to_edges
+from dataset.formats.masks import cv_mask
 
 FLOW_LONG_SIDE = 640  # px at which the flow is computed
 _SNAP_BAND = 1.5  # flow-resolution px the edge snap may move the boundary
@@ -38,7 +39,7 @@ def flow_propagate(frames: Sequence[np.ndarray], mask: np.ndarray, *,
         flow = dis.calc(gray, previous, None)
         if scale < 1:
             flow = cv2.resize(flow, (width, height), interpolation=cv2.INTER_LINEAR) / scale
-        warped = cv2.remap(current.astype(np.float32), grid_x + flow[..., 0], grid_y + flow[..., 1],
+        warped = cv2.remap(cv_mask(current, np.float32), grid_x + flow[..., 0], grid_y + flow[..., 1],
                            cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0) > 0.5
         current = snap_to_edges(frame, warped, band)
         out.append(current)

@@ -6,6 +6,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from dataset.formats.masks import cv_mask
+
 
 def disk(radius: int) -> np.ndarray:
     """Elliptic structuring element of the given radius (pixels)."""
@@ -16,9 +18,9 @@ def resize_mask(mask: np.ndarray, height: int, width: int) -> np.ndarray:
     """bool (h, w) mask resampled to (height, width): area-averaged when shrinking, bilinear
     when growing, then thresholded at one half so the boundary stays where it was."""
     if mask.shape == (height, width):
-        return mask.astype(bool, copy=True)
+        return cv_mask(mask, bool).copy()
     shrink = height * width < mask.shape[0] * mask.shape[1]
-    soft = cv2.resize(mask.astype(np.float32), (width, height),
+    soft = cv2.resize(cv_mask(mask, np.float32), (width, height),
                       interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
     return soft > 0.5
 
@@ -33,12 +35,12 @@ def snap_to_edges(image: np.ndarray, mask: np.ndarray, band: int,
     inside (first) and outside (second), e.g. the clicks. Works on the mask's bounding box only.
     """
     h, w = mask.shape
-    x, y, bw, bh = cv2.boundingRect(mask.astype(np.uint8))
+    x, y, bw, bh = cv2.boundingRect(cv_mask(mask))
     if band < 1 or bw == 0:
         return mask.copy()
     x0, y0 = max(x - band - 1, 0), max(y - band - 1, 0)
     x1, y1 = min(x + bw + band + 1, w), min(y + bh + band + 1, h)
-    roi = mask[y0:y1, x0:x1].astype(np.uint8)
+    roi = cv_mask(mask[y0:y1, x0:x1])
     kernel = disk(band)
     markers = np.zeros(roi.shape, np.int32)
     markers[cv2.erode(1 - roi, kernel, borderValue=1) > 0] = 1

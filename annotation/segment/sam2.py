@@ -37,6 +37,7 @@ from annotation.segment.base import (
     check_prompt,
 )
 from annotation.segment.propagate import flow_propagate
+from dataset.formats.masks import cv_mask
 
 _IMAGENET_MEAN = (0.485, 0.456, 0.406)
 _IMAGENET_STD = (0.229, 0.224, 0.225)
@@ -85,7 +86,7 @@ class Sam2Segmenter:
             kwargs["input_boxes"] = self._tensor(np.reshape(prompt.box, (2, 2)) * to_input).reshape(1, 1, 4)
         if prompt.prev_mask is not None:
             mask_size = tuple(self.model.prompt_encoder.mask_input_size)
-            small = cv2.resize(prompt.prev_mask.astype(np.float32), mask_size[::-1], interpolation=cv2.INTER_AREA)
+            small = cv2.resize(cv_mask(prompt.prev_mask, np.float32), mask_size[::-1], interpolation=cv2.INTER_AREA)
             kwargs["input_masks"] = self._tensor(small * _MASK_LOGIT_SCALE + _MASK_LOGIT_BIAS)[None, None]
         with torch.inference_mode():
             out = self.model(image_embeddings=features, multimask_output=True, **kwargs)
@@ -114,7 +115,7 @@ class Sam2Segmenter:
             inference_device=self.device, video_storage_device=self.device,
             inference_state_device=self.device, dtype=torch.float32)
         # what Sam2VideoProcessor.add_inputs_to_inference_session does for a mask prompt
-        square = cv2.resize(mask.astype(np.float32), (self.input_size, self.input_size),
+        square = cv2.resize(cv_mask(mask, np.float32), (self.input_size, self.input_size),
                             interpolation=cv2.INTER_AREA) >= 0.5
         session.add_mask_inputs(session.obj_id_to_idx(_OBJECT_ID), 0, self._tensor(square)[None, None])
         session.obj_with_new_inputs = [_OBJECT_ID]

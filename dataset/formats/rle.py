@@ -52,7 +52,8 @@ def rle_to_mask(rle: dict[str, Any]) -> np.ndarray:
         raise FormatError(f"RLE runs do not add up to {h}x{w} pixels")
     if h * w == 0:
         return np.zeros((h, w), bool)
-    return coco_mask.decode(coded).astype(bool)
+    # pycocotools decodes column-major; C order is what numpy slicing and OpenCV expect
+    return np.ascontiguousarray(coco_mask.decode(coded), dtype=bool)
 
 
 def _valid(runs: list[int], total: int) -> bool:

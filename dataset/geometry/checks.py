@@ -31,7 +31,8 @@ def float_map(array: np.ndarray, name: str, *, allow_nan: bool = True) -> np.nda
 
 
 def mask(array: np.ndarray | None, name: str, shape: tuple[int, int]) -> np.ndarray:
-    """Return ``array`` as a bool HxW mask of ``shape``; ``None`` becomes an all-False mask.
+    """Return ``array`` as a C-contiguous bool HxW mask of ``shape`` (OpenCV 5 refuses the
+    column-major layout decoded COCO RLE has); ``None`` becomes an all-False mask.
 
     Only bool masks, or integer masks holding just 0 and 1 / 0 and 255, are accepted: anything
     else (e.g. a JPEG-damaged mask with values in between) is an :class:`InputError`.
@@ -42,13 +43,13 @@ def mask(array: np.ndarray | None, name: str, shape: tuple[int, int]) -> np.ndar
     if arr.shape != shape:
         raise InputError(f"{name} has shape {arr.shape}, expected {shape} (the disparity's HxW)")
     if arr.dtype == np.bool_:
-        return arr
+        return np.ascontiguousarray(arr)
     if not np.issubdtype(arr.dtype, np.integer):
         raise InputError(f"{name} must be bool (or 0/1, 0/255 integers), got dtype {arr.dtype}")
     top = arr.max()
     if top not in (0, 1, 255) or not ((arr == 0) | (arr == top)).all():
         raise InputError(f"{name} holds values other than 0/1 or 0/255 (min {arr.min()}, max {top})")
-    return arr > 0
+    return np.ascontiguousarray(arr > 0)
 
 
 def image(array: np.ndarray, name: str, shape: tuple[int, int] | None = None) -> np.ndarray:

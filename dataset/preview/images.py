@@ -10,6 +10,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from dataset.formats.masks import cv_mask
 from dataset.preview.cloud import HIGHLIGHT_RGB
 
 COLORMAP = cv2.COLORMAP_TURBO
@@ -103,7 +104,7 @@ def outline(image: np.ndarray, masks: dict[str, np.ndarray]) -> np.ndarray:
     thickness = max(2, round(max(image.shape[:2]) / 320))
     # Illusions last: a support ring's inner edge runs along its illusion, which should stay visible.
     for name, mask in sorted(masks.items(), key=lambda item: (item[0].startswith("illusion"), item[0])):
-        contours, _ = cv2.findContours(np.asarray(mask, np.uint8), cv2.RETR_LIST, cv2.CHAIN_APPROX_SIMPLE)
+        contours, _ = cv2.findContours(cv_mask(mask), cv2.RETR_LIST, cv2.CHAIN_APPROX_SIMPLE)
         color = ILLUSION_RGB if name.startswith("illusion") else SUPPORT_RGB
         cv2.drawContours(out, contours, -1, color, thickness, lineType=cv2.LINE_AA)
     return out
