@@ -432,6 +432,7 @@ class EvaluationResult(Base):
     sample_id: Mapped[int] = mapped_column(ForeignKey("samples.id", ondelete="CASCADE"), index=True)
     method: Mapped[str] = mapped_column(String(32))
     regions: Mapped[dict[str, Any]] = mapped_column(default=dict, doc="region → metrics (EPE px, bad-x %).")
+    prediction: Mapped[str | None] = mapped_column(Text, doc="The PFM's path under the report's predictions/<method>/.")
     epe_all: Mapped[float | None]
     bad2_all: Mapped[float | None]
     epe_illusion: Mapped[float | None]

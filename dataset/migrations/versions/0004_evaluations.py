@@ -40,6 +40,7 @@ def upgrade() -> None:
     sa.Column('sample_id', sa.Integer(), nullable=False),
     sa.Column('method', sa.String(length=32), nullable=False),
     sa.Column('regions', sa.JSON(), nullable=False),
+    sa.Column('prediction', sa.Text(), nullable=True),
     sa.Column('epe_all', sa.Double(), nullable=True),
     sa.Column('bad2_all', sa.Double(), nullable=True),
     sa.Column('epe_illusion', sa.Double(), nullable=True),
