@@ -119,9 +119,10 @@ def evaluate_job(ctx: JobContext) -> dict[str, Any]:
     report["params"] = {k: p[k] for k in ("format", "checkpoint", "align", "max_disparity", "iters", "run_dir")}
     if "sgbm" in p["methods"]:
         report["sgbm"] = SgbmParams(max_disparity=p["max_disparity"]).__dict__
-    write_report(out, report, _pictures(out, reader, report, writer))
+    pictures = _pictures(out, reader, report, writer)
+    write_report(out, report, pictures)
     result = {"out": str(out), "evaluation": evaluation_id, "samples": report["samples"],
-              "failed": len(report["failed"]),
+              "failed": len(report["failed"]), "pictures": pictures,
               "headline": {m: {r: {k: d["regions"][r].get(k) for k in ("epe", "bad2")} for r in d["regions"]}
                            for m, d in report["methods"].items()}}
     with transaction(ctx.sessions) as s:
