@@ -239,7 +239,8 @@ def openapi_document() -> dict[str, Any]:
                         "properties": {"size": {"type": "array", "items": {"type": "integer"}}, "counts": {"type": "string"}}},
                 "Region": {"type": "object", "required": ["pair", "kind", "mask"], "properties": {
                     "pair": {"type": "integer"}, "kind": {"enum": ["illusion", "support"]}, "mask": _ref("RLE"),
-                    "clicks": {"type": "array"}}},
+                    "clicks": {"type": "array"},
+                    "illusion_type": {"enum": _ILLUSION_TYPES, "description": "the pair's type; default: the annotation's"}}},
                 "SegmentRequest": {"type": "object", "required": ["points", "labels"], "properties": {
                     "points": {"type": "array", "items": {"type": "array", "items": {"type": "number"}},
                                "description": "[[x, y], …] in full-resolution pixels"},
