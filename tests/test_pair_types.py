@@ -6,9 +6,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from sqlalchemy import select
+from alembic import command
+from sqlalchemy import select, text
 
-from dataset.db import transaction
+from dataset.db import alembic_config, make_engine, transaction
 from dataset.export.coco import coco_document
 from dataset.export.selection import select_samples
 from dataset.models import Frame, Region, Sample, SampleState, User
@@ -18,6 +19,7 @@ from dataset.services.annotate import save_annotation
 from dataset.services.demo import _true_regions
 from dataset.services.errors import InvalidInput
 from tests.test_generate import _user, generate_all, prepare
+from webapp.benchmarks.scale import seed
 from webapp.runtime import Runtime
 
 
@@ -64,3 +66,26 @@ def test_a_pair_with_two_types_is_refused(runtime: Runtime, tmp_path: Path) -> N
         regions = [{**r, "illusion_type": "mirror" if r["kind"] == "illusion" else "picture"} for r in regions]
         with pytest.raises(InvalidInput, match="pair 0 has two illusion types"):
             save_annotation(s, frame.id, user, version=0, regions=regions, illusion_type="picture", submit=True)
+
+
+def test_migration_gives_each_existing_pair_its_annotations_type(db_url: str) -> None:
+    cfg = alembic_config(db_url)
+    command.upgrade(cfg, "0001")  # the revision the seed writes
+    engine = make_engine(db_url)
+    with engine.begin() as conn:
+        seed(conn, 60)  # typed annotations, no regions yet
+        conn.execute(text("UPDATE annotations SET illusion_type = NULL WHERE id = (SELECT min(id) FROM annotations)"))
+        annotations = conn.execute(text("SELECT id, illusion_type FROM annotations ORDER BY id")).all()
+        for ann_id, _ in annotations:
+            for kind in ("illusion", "support"):
+                conn.execute(text("INSERT INTO regions (annotation_id, pair, kind, mask_rle, clicks) "
+                                  "VALUES (:a, 0, :k, '{}', '[]')"), {"a": ann_id, "k": kind})
+    command.upgrade(cfg, "0004")
+    with engine.connect() as conn:
+        typed = dict(annotations)
+        rows = conn.execute(text("SELECT annotation_id, illusion_type FROM regions")).all()
+    assert len(rows) == 2 * len(annotations) and any(typed.values()) and None in typed.values()
+    assert all(t == typed[a] for a, t in rows)
+    command.downgrade(cfg, "0003")
+    command.upgrade(cfg, "head")
+    engine.dispose()
