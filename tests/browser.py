@@ -78,6 +78,32 @@ def running_demo(home: Path, videos: int = 1) -> Iterator[str]:
             proc.kill()
 
 
+@contextmanager
+def serving(home: Path, timeout_s: float = 60) -> Iterator[str]:
+    """`illusion-studio serve` of the workspace ``home`` in a subprocess; yields its URL once it answers."""
+    port = free_port()
+    env = {k: v for k, v in os.environ.items() if not k.startswith("ILLUSION_STUDIO_")}
+    proc = subprocess.Popen([sys.executable, "-m", "webapp.cli", "--data-dir", str(home), "serve", "--port", str(port)],
+                            cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    url = f"http://127.0.0.1:{port}"
+    try:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            try:
+                with urllib.request.urlopen(f"{url}/healthz", timeout=2):
+                    break
+            except OSError:
+                assert proc.poll() is None and time.monotonic() < deadline, "server did not come up"
+                time.sleep(0.3)
+        yield url
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+
+
 def login(page, url: str, name: str, password: str) -> None:  # type: ignore[no-untyped-def]
     """Log in through the login form, as a person does, and land on the dashboard."""
     page.goto(url + "/login")

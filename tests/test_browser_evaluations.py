@@ -3,11 +3,6 @@ Samples page by the evaluation's error; an annotator gets 403."""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
-import time
-import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -16,7 +11,7 @@ import pytest
 from dataset.db import migrate, transaction
 from dataset.models import Role
 from dataset.services import users as user_service
-from tests.browser import ROOT, free_port, login
+from tests.browser import login, serving
 from tests.conftest import PASSWORD, make_settings
 from tests.evaluations_data import evaluated_database
 from webapp.runtime import Runtime
@@ -37,27 +32,8 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, list
             user_service.create_user(s, role.value, role, PASSWORD)
     _, ids = evaluated_database(rt, tmp)
     rt.close()
-    port = free_port()
-    env = {k: v for k, v in os.environ.items() if not k.startswith("ILLUSION_STUDIO_")}
-    proc = subprocess.Popen([sys.executable, "-m", "webapp.cli", "--data-dir", str(settings.home), "serve",
-                             "--port", str(port)], cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    url = f"http://127.0.0.1:{port}"
-    try:
-        deadline = time.monotonic() + 60
-        while True:
-            try:
-                with urllib.request.urlopen(f"{url}/healthz", timeout=2):
-                    break
-            except OSError:
-                assert time.monotonic() < deadline, "server did not come up"
-                time.sleep(0.3)
+    with serving(settings.home) as url:
         yield url, ids
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
 
 
 def test_curator_opens_a_report_and_sorts_samples_by_error(browser, server, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
