@@ -11,8 +11,10 @@ from sqlalchemy import select, text
 
 from dataset.db import alembic_config, make_engine, transaction
 from dataset.export.coco import coco_document
+from dataset.export.native import export_native
 from dataset.export.selection import select_samples
 from dataset.models import Frame, Region, Sample, SampleState, User
+from dataset.readers import open_reader
 from dataset.readers.version import VersionReader, pin_dataset_version
 from dataset.samples import load_output
 from dataset.services.annotate import save_annotation
@@ -55,6 +57,9 @@ def test_a_pair_keeps_its_own_type_from_annotation_to_coco(runtime: Runtime, tmp
     by_pair = {(a["attributes"]["pair"], a["attributes"]["kind"]): names[a["category_id"]] for a in doc["annotations"]}
     assert by_pair[(0, "illusion")] == "picture/illusion" and by_pair[(1, "illusion")] == "mirror/illusion"
     assert by_pair[(1, "support")] == "mirror/support"
+    export_native([record], runtime.media, tmp_path / "native", spec={"train": 1.0}, seed=0, progress=lambda *_: None)
+    exported = open_reader("native", tmp_path / "native")[0]
+    assert exported.meta["illusion_types"] == ["mirror", "picture"] and exported.regions["mirror"].any()
 
 
 def test_a_pair_with_two_types_is_refused(runtime: Runtime, tmp_path: Path) -> None:
