@@ -16,8 +16,8 @@ from sqlalchemy.engine import make_url
 from dataset.db import make_engine, make_session_factory, migrate, normalise_url, transaction
 from dataset.models import Role
 from dataset.services import users as user_service
+from dataset.settings import Settings, load_settings
 from webapp.runtime import Runtime
-from webapp.settings import Settings, load_settings
 
 TEST_DATABASE_URL = os.environ.get("TEST_DATABASE_URL", "")
 TEST_REDIS_URL = os.environ.get("TEST_REDIS_URL", "")

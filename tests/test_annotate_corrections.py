@@ -16,12 +16,12 @@ from dataset.db import migrate, transaction
 from dataset.models import Frame, FrameState
 from dataset.services import jobs as job_service
 from dataset.services.ingest import ingest_params
+from dataset.settings import Settings
 from dataset.synthetic import write_synthetic_dataset
 from tests.conftest import make_settings
 from tests.test_annotate import auth, interior_point, truth
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime
-from webapp.settings import Settings
 
 SIZES = {"small": (320, 180), "large": (1024, 576)}  # (width, height); large > WORK_LONG_SIDE
 

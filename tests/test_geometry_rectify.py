@@ -13,6 +13,7 @@ from dataset.geometry import (
     rectify_disparity,
     ring_mask,
 )
+from dataset.synthetic import render_video
 
 H, W = 120, 160
 V, U = np.mgrid[0:H, 0:W].astype(np.float64)
@@ -142,10 +143,7 @@ def test_integer_masks_are_accepted() -> None:
 
 
 def _synthetic_frames(seeds: range) -> list:
-    synthetic = pytest.importorskip("dataset.synthetic")
-    if not hasattr(synthetic, "render_video"):
-        pytest.skip("dataset.synthetic.render_video is not available yet")
-    return [frame for seed in seeds for frame in synthetic.render_video(seed, n_frames=2).frames]
+    return [frame for seed in seeds for frame in render_video(seed, n_frames=2).frames]
 
 
 def test_rectifying_mono_disparity_fixes_the_illusion_on_synthetic_scenes() -> None:

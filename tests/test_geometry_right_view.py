@@ -17,6 +17,7 @@ from dataset.geometry import (
 )
 from dataset.geometry.benchmark import reference_scale, reference_splat
 from dataset.geometry.right_view import MAX_DISPARITY_FRACTION
+from dataset.synthetic import render_video
 
 
 def _valid_ratio(disparity: np.ndarray, s: float) -> float:
@@ -228,11 +229,8 @@ def test_right_view_from_true_disparity_matches_the_rendered_one() -> None:
     unwarped left image ~20–21 dB. 33 dB therefore certifies sub-half-pixel registration,
     and the test also checks the margin over the 0.5 px-error warp directly.
     """
-    synthetic = pytest.importorskip("dataset.synthetic")
-    if not hasattr(synthetic, "render_video"):
-        pytest.skip("dataset.synthetic.render_video is not available yet")
     for seed in range(2):
-        frame = synthetic.render_video(seed, n_frames=1).frames[0]
+        frame = render_video(seed, n_frames=1).frames[0]
         exact = synthesize_right_view(frame.left, frame.disparity, scale=1.0, inpaint="none")
         off = synthesize_right_view(frame.left, frame.disparity + 0.5, scale=1.0, inpaint="none")
         psnr = _psnr(exact.image, frame.right, ~exact.holes)

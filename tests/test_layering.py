@@ -1,16 +1,77 @@
-"""The one-way house: what each package may import (DESIGN.md, README "Architecture")."""
+"""The one-way house: what each package may import (DESIGN.md, README "Architecture").
+
+``model`` may import ``dataset`` and ``annotation``; ``annotation`` imports only
+``dataset.formats``, ``dataset.filecache`` and ``dataset.atomic``; nothing imports ``webapp`` but
+``webapp``; ``dataset`` never imports ``model`` or ``webapp``; ``dataset.geometry`` imports no
+Flask, database or torch. Every import counts, also those inside functions.
+"""
 
 from __future__ import annotations
 
+import ast
 import subprocess
 import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("annotation", "dataset", "model", "webapp")
+ANNOTATION_MAY_USE = ("dataset.formats", "dataset.filecache", "dataset.atomic")
+GEOMETRY_MUST_NOT_USE = ("flask", "flask_login", "sqlalchemy", "alembic", "torch", "transformers")
 
 
-def test_the_geometry_core_imports_no_torch() -> None:
-    # A fresh interpreter: this test process may have imported torch for other tests.
+def _imports() -> list[tuple[str, str]]:
+    """(importing module, imported module) for every import statement of the four packages."""
+    found = []
+    for package in PACKAGES:
+        for path in sorted((ROOT / package).rglob("*.py")):
+            parts = path.relative_to(ROOT).with_suffix("").parts
+            module = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+            here = parts[:-1]  # the package a relative import starts from
+            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+                if isinstance(node, ast.Import):
+                    found += [(module, alias.name) for alias in node.names]
+                elif isinstance(node, ast.ImportFrom):
+                    base = ".".join(here[: len(here) - node.level + 1]) if node.level else ""
+                    target = ".".join(p for p in (base, node.module or "") if p)
+                    found.append((module, target))
+    return found
+
+
+def _within(name: str, prefixes: tuple[str, ...]) -> bool:
+    return any(name == p or name.startswith(p + ".") for p in prefixes)
+
+
+def _violations(rule: object) -> list[str]:
+    return [f"{importer} imports {imported}" for importer, imported in _imports() if rule(importer, imported)]  # type: ignore[operator]
+
+
+def test_the_walk_sees_the_imports() -> None:
+    pairs = set(_imports())
+    assert ("webapp.app", "dataset.settings") in pairs or ("webapp.runtime", "dataset.settings") in pairs
+    assert ("annotation.depth", "annotation.depth.base") in pairs
+    assert len(pairs) > 300
+
+
+def test_nothing_imports_webapp_but_webapp() -> None:
+    assert _violations(lambda a, b: not _within(a, ("webapp",)) and _within(b, ("webapp",))) == []
+
+
+def test_dataset_never_imports_model_or_webapp() -> None:
+    assert _violations(lambda a, b: _within(a, ("dataset",)) and _within(b, ("model", "webapp"))) == []
+
+
+def test_annotation_imports_only_the_formats_the_file_cache_and_atomic_writes() -> None:
+    assert _violations(lambda a, b: _within(a, ("annotation",)) and _within(b, ("dataset", "model", "webapp"))
+                       and not _within(b, ANNOTATION_MAY_USE)) == []
+
+
+def test_model_imports_dataset_and_annotation_but_not_webapp() -> None:
+    assert _violations(lambda a, b: _within(a, ("model",)) and _within(b, ("webapp",))) == []
+
+
+def test_the_geometry_core_imports_no_flask_database_or_torch() -> None:
+    assert _violations(lambda a, b: _within(a, ("dataset.geometry",)) and _within(b, GEOMETRY_MUST_NOT_USE)) == []
+    # …nor anything that does: a fresh interpreter, since this process may hold torch already.
     code = ("import sys, dataset.geometry; "
             "heavy = sorted(m for m in ('torch', 'flask', 'sqlalchemy') if m in sys.modules); "
             "assert not heavy, heavy")

@@ -21,9 +21,9 @@ import pytest
 
 from dataset.db import migrate
 from dataset.models import Job
+from dataset.settings import Settings
 from tests.conftest import TEST_REDIS_URL, make_settings
 from webapp.runtime import Runtime
-from webapp.settings import Settings
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -12,9 +12,9 @@ from werkzeug.exceptions import HTTPException
 
 from dataset.atomic import atomic_write_bytes
 from dataset.services.errors import ServiceError
+from dataset.settings import Settings
 from webapp.auth import init_auth, is_api_request, json_error
 from webapp.runtime import Runtime
-from webapp.settings import Settings
 
 STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
 

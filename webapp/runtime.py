@@ -12,7 +12,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from dataset.db import make_engine, make_session_factory
 from dataset.media import MediaStore
 from dataset.models import Job, User
-from webapp.settings import Settings
+from dataset.settings import Settings
 
 
 @dataclass

@@ -9,7 +9,7 @@ from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
 from dataset.models import Frame, FrameCount, FrameState, Video, utcnow
-from dataset.services.errors import Conflict, InvalidInput
+from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.paging import Page, keyset_page
 
 # Which states count as having reached each funnel stage (rejected/deleted frames drop out).
@@ -104,3 +104,11 @@ def frame_json(frame: Frame, prefilter_keep: bool | None) -> dict[str, Any]:
         "revision": frame.revision, "content_sha256": frame.content_sha256,
         "image": frame.media_key, "thumb": frame.assets.get("thumb"), "prefilter_keep": prefilter_keep,
     }
+
+
+def get_frame(session: Session, frame_id: int) -> Frame:
+    """The frame with ``frame_id``; :class:`NotFound` when there is none."""
+    frame = session.get(Frame, frame_id)
+    if frame is None:
+        raise NotFound(f"no frame {frame_id}")
+    return frame

@@ -36,6 +36,7 @@ from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.frames import update_frame
 from dataset.services.inpaint import hole_filler
 from dataset.services.jobs import JobContext
+from dataset.settings import Settings
 from dataset.version import code_version
 
 GENERATABLE = (FrameState.annotated, FrameState.generated, FrameState.accepted)
@@ -62,7 +63,7 @@ def _depth_model(model_path: str, device: str) -> Any:
     return make_depth_backend("depth-anything-v2", model_path=Path(model_path), device=device)
 
 
-def mono_disparity(settings: Any, media: MediaStore, frame: Frame, video: Video, left: np.ndarray) -> MonoDisparity:
+def mono_disparity(settings: Settings, media: MediaStore, frame: Frame, video: Video, left: np.ndarray) -> MonoDisparity:
     """The frame's monocular disparity, by the first source that applies:
 
     an external reconstruction (px, scale fixed to 1) → Depth Anything V2 when configured (cached
@@ -188,7 +189,7 @@ def _pairs(regions: list[tuple[int, RegionKind, dict[str, Any]]]) -> list[tuple[
     return out
 
 
-def _qa(settings: Any, reports: list[Any], view: Any, check: Any, pair_ids: list[int]) -> dict[str, Any]:
+def _qa(settings: Settings, reports: list[Any], view: Any, check: Any, pair_ids: list[int]) -> dict[str, Any]:
     pairs = [{**r.as_dict(), "pair": pair} for r, pair in zip(reports, pair_ids, strict=True)]
     for p in pairs:
         p.pop("index", None)

@@ -22,6 +22,7 @@ from dataset.db import transaction
 from dataset.media import MediaStore
 from dataset.models import Job, JobState, User, utcnow
 from dataset.services.errors import Conflict, NotFound
+from dataset.settings import Settings
 
 LOG_LIMIT = 200_000  # characters kept of a job's log; the head is dropped first
 HEARTBEAT_S = 10.0
@@ -113,7 +114,7 @@ class JobEnv(Protocol):
 
     sessions: sessionmaker[Session]
     media: MediaStore
-    settings: Any
+    settings: Settings
 
     def submit(self, session: Session, kind: str, params: dict[str, Any], user: User | None) -> Job: ...
 

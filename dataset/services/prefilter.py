@@ -25,6 +25,7 @@ from dataset.models import Frame, FrameState, Job, JobState, PrefilterResult, Us
 from dataset.services.errors import Conflict, InvalidInput
 from dataset.services.frames import update_frame
 from dataset.services.jobs import JobContext
+from dataset.settings import Settings
 
 Submit = Callable[[Session, str, dict[str, Any], User | None], Job]
 CHUNK = 32  # frames per job: small enough to spread over workers, large enough to batch the VLM
@@ -72,7 +73,7 @@ def _backend(name: str, base_url: str, model: str, api_key: str, model_path: str
                         model_path=Path(model_path) if model_path else None, device=device, rule=rule)
 
 
-def backend_for(settings: Any, params: dict[str, Any]) -> PrefilterBackend:
+def backend_for(settings: Settings, params: dict[str, Any]) -> PrefilterBackend:
     try:
         rule = KeepRule(any_of=tuple(settings.vlm_keep_any_of), none_of=tuple(settings.vlm_keep_none_of),
                         veto_pair=tuple(settings.vlm_keep_veto) if settings.vlm_keep_veto else None)

@@ -8,7 +8,7 @@ from flask_login import current_user
 
 from dataset.formats import FormatError, rle_to_mask
 from dataset.models import Frame, RegionKind, Role, User
-from dataset.services import annotate
+from dataset.services import annotate, leases, segmentation
 from dataset.services import jobs as job_service
 from dataset.services.errors import InvalidInput, NotFound
 from webapp.api.blueprint import api, get_or_404, json_body
@@ -23,8 +23,8 @@ def _iso(value) -> str:  # type: ignore[no-untyped-def]
 def _prefetch(frame: Frame) -> None:
     """Queue embeddings for this frame and the next ones of its video, so clicks never wait."""
     settings = runtime().settings
-    frames = [g.db.get(Frame, i) for i in annotate.prefetch_ids(g.db, frame)]
-    missing = [f.id for f in frames if not annotate.embedding_ready(settings, f)]
+    frames = [g.db.get(Frame, i) for i in leases.prefetch_ids(g.db, frame)]
+    missing = [f.id for f in frames if not segmentation.embedding_ready(settings, f)]
     if missing:
         runtime().submit(g.db, "encode", {"frame_ids": missing}, g.db.get(User, current_user.id))
 
@@ -32,7 +32,7 @@ def _prefetch(frame: Frame) -> None:
 @api.post("/queue/annotate/next")
 @requires(Role.annotator)
 def annotate_next() -> ResponseReturnValue:
-    leased = annotate.next_frame(g.db, current_user, runtime().settings.annotation_lease_s)
+    leased = leases.next_frame(g.db, current_user, runtime().settings.annotation_lease_s)
     if leased is None:
         g.db.rollback()
         raise NotFound("no approved frames are waiting for annotation")
@@ -46,14 +46,14 @@ def annotate_next() -> ResponseReturnValue:
 @requires(Role.annotator)
 def frame_detail(frame_id: int) -> ResponseReturnValue:
     detail = annotate.frame_detail(g.db, frame_id, current_user)
-    detail["embedding_ready"] = annotate.embedding_ready(runtime().settings, g.db.get(Frame, frame_id))
+    detail["embedding_ready"] = segmentation.embedding_ready(runtime().settings, g.db.get(Frame, frame_id))
     return detail
 
 
 @api.post("/frames/<int:frame_id>/lease")
 @requires(Role.annotator)
 def renew_lease(frame_id: int) -> ResponseReturnValue:
-    expires = annotate.renew_lease(g.db, frame_id, current_user, runtime().settings.annotation_lease_s)
+    expires = leases.renew_lease(g.db, frame_id, current_user, runtime().settings.annotation_lease_s)
     _prefetch(g.db.get(Frame, frame_id))  # a frame opened directly (or by ←/→) gets prepared too
     g.db.commit()
     return {"frame_id": frame_id, "lease_expires": _iso(expires)}
@@ -62,7 +62,7 @@ def renew_lease(frame_id: int) -> ResponseReturnValue:
 @api.post("/frames/<int:frame_id>/lease/release")
 @requires(Role.annotator)
 def release_lease(frame_id: int) -> ResponseReturnValue:
-    annotate.release_lease(g.db, frame_id, current_user)
+    leases.release_lease(g.db, frame_id, current_user)
     g.db.commit()
     return {"frame_id": frame_id, "released": True}
 
@@ -72,7 +72,7 @@ def release_lease(frame_id: int) -> ResponseReturnValue:
 def segment(frame_id: int) -> ResponseReturnValue:
     frame = get_or_404(Frame, frame_id, "frame")
     rt = runtime()
-    return annotate.segment(rt.settings, rt.media, frame, json_body())
+    return segmentation.segment(rt.settings, rt.media, frame, json_body())
 
 
 @api.post("/frames/<int:frame_id>/annotation")

@@ -26,7 +26,7 @@ from annotation.segment import Embedding
 from dataset.db import transaction
 from dataset.formats import mask_to_rle, rle_to_mask
 from dataset.models import Frame, User
-from dataset.services import annotate
+from dataset.services import segmentation
 from dataset.services import users as user_service
 from dataset.synthetic import write_synthetic_dataset
 from webapp.benchmarks.segment import default_sam2_dir, person_click
@@ -52,10 +52,10 @@ def _bench_backend(rt: Runtime, frame_id: int, token: str, truths: list[np.ndarr
     with rt.sessions() as s:
         frame = s.get(Frame, frame_id)
     started = time.perf_counter()
-    annotate.encode_frames(rt.settings, rt.media, [frame])
+    segmentation.encode_frames(rt.settings, rt.media, [frame])
     encode_ms = (time.perf_counter() - started) * 1000
-    segmenter = annotate.settings_segmenter(rt.settings)
-    embedding = Embedding.from_bytes(annotate.embedding_cache(rt.settings).get(frame.content_sha256, segmenter.model_id))
+    segmenter = segmentation.settings_segmenter(rt.settings)
+    embedding = Embedding.from_bytes(segmentation.embedding_cache(rt.settings).get(frame.content_sha256, segmenter.model_id))
 
     port = _free_port()
     # The server runs in its own process, as in production, so client and server don't share a GIL.

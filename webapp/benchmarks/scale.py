@@ -34,8 +34,8 @@ from dataset.models import User
 from dataset.services import jobs as job_service
 from dataset.services import users as user_service
 from dataset.services.prefilter import launch_prefilter
+from dataset.settings import SETTINGS_FILE
 from webapp.benchmarks.click import _free_port, _wait_until_up
-from webapp.settings import SETTINGS_FILE
 
 FRAMES_PER_VIDEO = 1000
 CHUNK_VIDEOS = 20  # videos generated and inserted per round trip

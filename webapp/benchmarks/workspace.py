@@ -14,9 +14,9 @@ from dataset.services import users as user_service
 from dataset.services.demo import seed_reviews_and_annotations
 from dataset.services.ingest import ingest_params
 from dataset.services.sample_review import review_sample
+from dataset.settings import load_settings
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime
-from webapp.settings import load_settings
 
 
 def approved_frame_workspace(home: Path, scene: Path, **settings: Any) -> tuple[Runtime, int, int]:

@@ -8,8 +8,8 @@ from pathlib import Path
 import click
 
 from dataset.db import schema_is_current
+from dataset.settings import Settings, SettingsError, load_settings
 from webapp.runtime import Runtime
-from webapp.settings import Settings, SettingsError, load_settings
 
 
 @dataclass

@@ -18,9 +18,9 @@ from dataset.models import JobState, Role, User, Video
 from dataset.services import jobs as job_service
 from dataset.services import users as user_service
 from dataset.services.ingest import ingest_params
+from dataset.settings import HOME_ENV, Settings, SettingsError, load_settings
 from webapp.cli.state import CliState, pass_state
 from webapp.runtime import Runtime
-from webapp.settings import HOME_ENV, Settings, SettingsError, load_settings
 
 DEMO_DIR = Path("var/demo")
 DEMO_PASSWORD = "{role}-demo"

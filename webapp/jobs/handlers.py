@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from dataset.capture import import_capture_job, import_reconstruction_job
 from dataset.export.jobs import export_job, import_job
-from dataset.services.annotate import encode_job, propagate_job
 from dataset.services.generate import generate_job
 from dataset.services.ingest import ingest_video
 from dataset.services.jobs import Handler
 from dataset.services.prefilter import prefilter_frames
+from dataset.services.segmentation import encode_job, propagate_job
 from model.jobs import evaluate_job, train_job
 
 HANDLERS: dict[str, Handler] = {
