@@ -3,6 +3,7 @@ and migration 0002 — checked against the queries they replace, on both databas
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import pytest
@@ -251,3 +252,46 @@ def test_migration_upgrades_a_populated_database(db_url: str) -> None:
         assert "prefilter_keep" not in list(conn.execute(text("SELECT * FROM frames LIMIT 0")).keys())
         assert conn.execute(text("SELECT count(*) FROM frames")).scalar() == 2500
     engine.dispose()
+
+
+@pytest.mark.parametrize("sparse", [False, True])
+def test_prefilter_claims_the_backlog_in_keyed_pages(sessions, monkeypatch: pytest.MonkeyPatch, sparse: bool) -> None:  # type: ignore[no-untyped-def]
+    from dataset.services import jobs as job_service
+    from dataset.services import prefilter
+
+    monkeypatch.setattr(prefilter, "CLAIM_PAGE", 3)  # pages end inside chunks and inside videos
+    with transaction(sessions) as s:
+        _seed(s, videos=3, per_video=21)
+    with transaction(sessions) as s:
+        backlog = s.execute(select(Frame.id, Frame.video_id).where(Frame.state == FrameState.ingested)
+                            .order_by(Frame.video_id, Frame.index)).all()
+        jobs = prefilter.launch_prefilter(s, lambda s_, kind, params, user: job_service.create_job(s_, kind, params, user),
+                                          None, chunk=2, sparse=sparse)
+    with sessions() as s:
+        claimed = [fid for job in jobs for fid in s.get(Job, job.id).params["frame_ids"]]
+        assert claimed == [fid for fid, _ in backlog]
+        if sparse:
+            by_video = {}
+            for fid, vid in backlog:
+                by_video.setdefault(vid, []).append(fid)
+            assert [s.get(Job, j.id).params["frame_ids"] for j in jobs] == list(by_video.values())
+        else:
+            assert [len(s.get(Job, j.id).params["frame_ids"]) for j in jobs][:-1] == [2] * (len(jobs) - 1)
+        owners = dict(s.execute(select(Frame.id, Frame.prefilter_job_id).where(Frame.state == FrameState.ingested)).all())
+        assert all(owners[fid] == job.id for job in jobs for fid in s.get(Job, job.id).params["frame_ids"])
+
+
+@pytest.mark.slow
+def test_bench_scale_reports_every_route_at_both_sizes(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from click.testing import CliRunner
+
+    from webapp.cli import main
+
+    result = CliRunner().invoke(main, ["bench", "scale", "--frames", "2000", "--repeats", "2", "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.output)
+    sqlite = report["backends"]["sqlite"]
+    assert report["frames"] == 2000 and sqlite["tenth"]["frames"] == 1000
+    assert sqlite["counts"]["frame"] == 2000 and sqlite["counts"]["sample"] > 0
+    assert set(sqlite["routes"]) == set(sqlite["tenth"]["routes"]) and len(sqlite["routes"]) >= 20
+    assert all(0 < t["p50_ms"] <= t["p95_ms"] for t in sqlite["routes"].values())

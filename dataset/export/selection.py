@@ -33,27 +33,28 @@ def parse_states(states: Sequence[str]) -> list[str]:
 
 def select_samples(session: Session, states: Sequence[str] = DEFAULT_STATES,
                    video_ids: Sequence[int] | None = None) -> list[SampleRecord]:
-    """The samples to export, sorted by video folder and frame index."""
+    """The samples to export, sorted by video folder and frame index.
+
+    Streamed: rows come ordered so that each frame's chosen sample is its first, in chunks, and
+    each becomes a plain record at once; only the records are held, never every ORM row.
+    """
+    chosen = Sample.state.in_([SampleState(s) for s in parse_states(states)])
+    scope = [Video.id.in_(list(video_ids))] if video_ids else []
+    videos = session.execute(select(Video.content_sha256, Video.name).where(
+        Video.id.in_(select(Frame.video_id).join(Sample, Sample.frame_id == Frame.id).where(chosen)), *scope)).all()
+    dirs = video_dirs(dict(videos))
     query = (select(Sample, Frame, Video, Annotation.illusion_type)
              .join(Frame, Frame.id == Sample.frame_id).join(Video, Video.id == Frame.video_id)
-             .outerjoin(Annotation, Annotation.frame_id == Frame.id)
-             .where(Sample.state.in_([SampleState(s) for s in parse_states(states)])))
-    if video_ids:
-        query = query.where(Video.id.in_(list(video_ids)))
-    newest: dict[int, tuple[Sample, Frame, Video, Any]] = {}
-    for row in session.execute(query):
-        sample = row[0]
-        held = newest.get(sample.frame_id)
-        if held is None or _recency(sample) > _recency(held[0]):
-            newest[sample.frame_id] = tuple(row)  # type: ignore[assignment]
-    dirs = video_dirs({video.content_sha256: video.name for _, _, video, _ in newest.values()})
-    items = [_item(dirs[video.content_sha256], sample, frame, video, illusion_type)
-             for sample, frame, video, illusion_type in newest.values()]
+             .outerjoin(Annotation, Annotation.frame_id == Frame.id).where(chosen, *scope)
+             # the newest annotation version first (no version: oldest), then the newest row
+             .order_by(Sample.frame_id, Sample.annotation_version.desc().nulls_last(), Sample.id.desc())
+             .execution_options(yield_per=1000))
+    items, last_frame = [], None
+    for sample, frame, video, illusion_type in session.execute(query):
+        if sample.frame_id != last_frame:
+            items.append(_item(dirs[video.content_sha256], sample, frame, video, illusion_type))
+            last_frame = sample.frame_id
     return sorted(items, key=lambda item: (item.video_dir, item.index))
-
-
-def _recency(sample: Sample) -> tuple[int, int]:
-    return (sample.annotation_version if sample.annotation_version is not None else -1, sample.id)
 
 
 def _item(video_dir: str, sample: Sample, frame: Frame, video: Video, illusion_type: Any) -> SampleRecord:

@@ -45,11 +45,13 @@ def parse_cursor(name: str, value: str | None, width: int) -> tuple[int, ...] | 
 
 def keyset_page(session: Session, query: Select[Any], keys: tuple[ColumnElement[Any], ...], *, limit: int,
                 after: str | None = None, before: str | None = None, offset: int = 0,
-                descending: bool = False) -> Page:
+                descending: bool = False, keys_query: Select[Any] | None = None) -> Page:
     """One page of ``query`` ordered by ``keys`` (ascending, or all descending).
 
     ``after``/``before`` are cursors from a previous page; without them the page starts ``offset``
-    rows in. ``query`` selects the key columns last: the cursors are read from them.
+    rows in. ``query`` selects the key columns last: the cursors are read from them. ``keys_query``
+    selects only the keys of the same rows, without the joins the page's columns need: the offset
+    walk and the first/last-page checks run on it (an index-only scan where the index covers it).
     """
     if after and before:
         raise InvalidInput("give after or before, not both")
@@ -71,8 +73,10 @@ def keyset_page(session: Session, query: Select[Any], keys: tuple[ColumnElement[
         asc = forward != descending
         return q.order_by(None).order_by(*(k.asc() if asc else k.desc() for k in keys))
 
+    walk = query.with_only_columns(*keys) if keys_query is None else keys_query
+
     def exists(condition: ColumnElement[bool]) -> bool:
-        return session.execute(query.with_only_columns(*keys).order_by(None).where(condition).limit(1)).first() is not None
+        return session.execute(walk.order_by(None).where(condition).limit(1)).first() is not None
 
     def step(values: tuple[int, ...], toward_end: bool) -> str:
         # The cursor just past ``values``, so that before=/after= it still includes ``values``.
@@ -92,9 +96,9 @@ def keyset_page(session: Session, query: Select[Any], keys: tuple[ColumnElement[
     inclusive = False
     if start is None and offset:
         # The start key, by walking only the key columns (an index-only scan), then a keyed page.
-        first = session.execute(ordered(query.with_only_columns(*keys), True).offset(offset).limit(1)).first()
+        first = session.execute(ordered(walk, True).offset(offset).limit(1)).first()
         if first is None:
-            final = session.execute(ordered(query.with_only_columns(*keys), False).limit(1)).first()
+            final = session.execute(ordered(walk, False).limit(1)).first()
             return Page([], None if final is None else step(tuple(final), True), None)
         start, inclusive = tuple(first), True
     page_query = query if start is None else query.where(beyond(start, True, inclusive))
@@ -108,7 +112,7 @@ def keyset_page(session: Session, query: Select[Any], keys: tuple[ColumnElement[
     return Page(rows, prev, cursor(_key(rows[-1], width)) if more_after else None)
 
 
-COUNT_CAP = 1000
+COUNT_CAP = 500
 
 
 def bounded_count(session: Session, query: Select[Any], column: ColumnElement[Any],

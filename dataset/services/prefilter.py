@@ -16,7 +16,7 @@ from typing import Any
 
 import cv2
 import numpy as np
-from sqlalchemy import or_, select
+from sqlalchemy import or_, select, tuple_, update
 from sqlalchemy.orm import Session
 
 from annotation.vlm import KeepRule, PrefilterBackend, Verdict, make_backend, sparse_expand, sparse_samples, sparse_step
@@ -30,6 +30,7 @@ from dataset.settings import Settings
 Submit = Callable[[Session, str, dict[str, Any], User | None], Job]
 CHUNK = 32  # frames per job: small enough to spread over workers, large enough to batch the VLM
 BATCH = 8  # images per VLM call
+CLAIM_PAGE = 5000  # frame ids read per query while claiming the backlog
 
 
 def launch_prefilter(session: Session, submit: Submit, user: User | None, *, video_id: int | None = None,
@@ -42,25 +43,36 @@ def launch_prefilter(session: Session, submit: Submit, user: User | None, *, vid
         raise InvalidInput("chunk must be 1..1000 frames")
     owner = select(Job.id).where(Job.id == Frame.prefilter_job_id,
                                  Job.state.in_([JobState.queued, JobState.running])).exists()
-    query = (select(Frame).where(Frame.state == FrameState.ingested, or_(Frame.prefilter_job_id.is_(None), ~owner))
-             .order_by(Frame.video_id, Frame.index).with_for_update(skip_locked=True, of=Frame))
+    query = (select(Frame.id, Frame.video_id, Frame.index)
+             .where(Frame.state == FrameState.ingested, or_(Frame.prefilter_job_id.is_(None), ~owner))
+             .order_by(Frame.video_id, Frame.index).limit(CLAIM_PAGE).with_for_update(skip_locked=True, of=Frame))
     if video_id is not None:
         query = query.where(Frame.video_id == video_id)
-    frames = session.scalars(query).all()
     options = {"backend": backend, "base_url": base_url, "model": model, "sparse": sparse}
-    if sparse:  # sparse decisions span a whole video, so one job per video
-        groups: dict[int, list[Frame]] = {}
-        for frame in frames:
-            groups.setdefault(frame.video_id, []).append(frame)
-        batches = list(groups.values())
-    else:
-        batches = [frames[i:i + chunk] for i in range(0, len(frames), chunk)]
-    jobs = []
-    for batch in batches:
-        job = submit(session, "prefilter", {**options, "frame_ids": [f.id for f in batch]}, user)
-        for frame in batch:
-            frame.prefilter_job_id = job.id
+    jobs: list[Job] = []
+
+    def claim(frame_ids: list[int]) -> None:
+        job = submit(session, "prefilter", {**options, "frame_ids": frame_ids}, user)
+        session.execute(update(Frame).where(Frame.id.in_(frame_ids)).values(prefilter_job_id=job.id)
+                        .execution_options(synchronize_session=False))
         jobs.append(job)
+
+    # The backlog is read in keyed pages of ids, never loaded whole: a 1.4M-frame ingest stays flat in memory.
+    pending: list[int] = []
+    pending_video, last = None, None
+    while True:
+        rows = session.execute(query if last is None else query.where(tuple_(Frame.video_id, Frame.index) > last)).all()
+        for frame_id, frame_video, index in rows:
+            # Sparse decisions span a whole video, so one job per video; otherwise chunks of ``chunk``.
+            if pending and (len(pending) == chunk if not sparse else frame_video != pending_video):
+                claim(pending)
+                pending = []
+            pending.append(frame_id)
+            pending_video, last = frame_video, (frame_video, index)
+        if len(rows) < CLAIM_PAGE:
+            break
+    if pending:
+        claim(pending)
     session.flush()
     return jobs
 

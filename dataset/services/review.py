@@ -90,15 +90,21 @@ def review_query(*, video_id: int | None, states: Sequence[FrameState], keep: st
     """
     query = (select(Frame, PrefilterResult, *FRAME_ORDER)
              .outerjoin(PrefilterResult, PrefilterResult.id == Frame.prefilter_result_id)
-             .where(_in_states(states)))
-    if video_id is not None:
-        query = query.where(Frame.video_id == video_id)
-    if keep is not None:
-        query = query.where(Frame.prefilter_keep.is_(None) if keep == "null" else Frame.prefilter_keep == _KEEP[keep])
+             .where(*_frame_filter(video_id, states, keep)))
     if question is not None:
         value = PrefilterResult.answers[question - 1].as_boolean()  # a JSON path on SQLite and PostgreSQL alike
         query = query.where(value.is_(None) if answer == "unknown" else value == (answer == "yes"))
     return query.order_by(*FRAME_ORDER)
+
+
+def _frame_filter(video_id: int | None, states: Sequence[FrameState], keep: str | None) -> list[ColumnElement[bool]]:
+    """The conditions on the frame row alone (every filter but a question's answer)."""
+    where = [_in_states(states)]
+    if video_id is not None:
+        where.append(Frame.video_id == video_id)
+    if keep is not None:
+        where.append(Frame.prefilter_keep.is_(None) if keep == "null" else Frame.prefilter_keep == _KEEP[keep])
+    return where
 
 
 def _in_states(states: Sequence[FrameState]) -> ColumnElement[bool]:
@@ -144,7 +150,10 @@ def review_page(session: Session, *, video_id: int | None = None, state: str = "
     if not 1 <= limit <= 500 or offset < 0:
         raise InvalidInput("limit must be 1..500 and offset ≥ 0")
     query = review_query(video_id=video_id, states=states, keep=keep, question=question, answer=answer)
-    page = keyset_page(session, query, FRAME_ORDER, limit=limit, after=after, before=before, offset=offset)
+    # Without a question the keys come from the frames index alone, not through the verdicts' join.
+    keys = None if question is not None else select(*FRAME_ORDER).where(*_frame_filter(video_id, states, keep))
+    page = keyset_page(session, query, FRAME_ORDER, limit=limit, after=after, before=before, offset=offset,
+                       keys_query=keys)
     if question is None:
         total, exact = frame_total(session, video_id=video_id, states=states,
                                    keep="any" if keep is None else _KEEP[keep]), True

@@ -12,15 +12,22 @@ export function stepOf(direction, grid, oneColumn = false) {
   return { left: -1, right: 1, up: -columns, down: columns }[direction];
 }
 
-// The offset of the next or previous page, or a message when there is none.
+// The next or previous page — its keyset cursor (the API's next/prev) and the offset to show —
+// or a message when there is none.
 export function pageOffset(view, direction, pageSize, inFilter) {
   if (direction > 0) {
-    if (view.offset + view.items.length >= view.total) return "This is the last page.";
+    if (!view.next) return "This is the last page.";
     // Decided items have left the filter: the next page starts after the ones still in it.
-    return view.offset + view.items.filter(inFilter).length;
+    return { offset: view.offset + view.items.filter(inFilter).length, after: view.next, before: null };
   }
-  if (view.offset === 0) return "This is the first page.";
-  return Math.max(0, view.offset - pageSize);
+  if (!view.prev) return "This is the first page.";
+  return { offset: Math.max(0, view.offset - pageSize), after: null, before: view.prev };
+}
+
+// A page's cursors into the request (and the address, for deep links).
+export function setCursor(params, view) {
+  if (view.after) params.set("after", view.after);
+  if (view.before) params.set("before", view.before);
 }
 
 export function focusTile(grid, index) {

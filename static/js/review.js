@@ -2,7 +2,7 @@
 // an undo stack and a large view. Decisions run one after another, in the order the keys were
 // pressed, so each sends the revision the previous one returned and undo undoes what it says.
 import { api, el, poll } from "./api.js";
-import { focusTile as focusGridTile, pageOffset, serial, stepOf } from "./grid.js";
+import { focusTile as focusGridTile, pageOffset, serial, setCursor, stepOf } from "./grid.js";
 
 const $ = (id) => document.getElementById(id);
 const root = $("review");
@@ -20,7 +20,8 @@ const MARK = { yes: "✓", no: "✗", unknown: "?" };
 const STEPS = { ArrowLeft: "left", h: "left", ArrowRight: "right", l: "right", ArrowUp: "up", k: "up",
                 ArrowDown: "down", j: "down" };
 
-const view = { items: [], total: 0, offset: 0, focus: 0, anchor: null, selected: new Set(), questions: [] };
+const view = { items: [], total: 0, offset: 0, focus: 0, anchor: null, selected: new Set(), questions: [],
+               after: null, before: null, prev: null, next: null };
 const latest = new Map();  // frame id → newest known item, also for frames on other pages (undo needs them)
 const mine = new Map();    // frame id → the state this session's decisions left it in, for the counters
 const undoStack = [];      // [{decision, frames: [{before, after, mineBefore}]}]
@@ -33,6 +34,7 @@ const enqueue = serial((err) => say(err.message, "error"));
 function query() {
   const f = filters.elements;
   const params = new URLSearchParams({ state: f.state.value, limit: PAGE, offset: view.offset });
+  setCursor(params, view);
   if (root.dataset.videoId) params.set("video_id", root.dataset.videoId);
   if (f.keep.value) params.set("keep", f.keep.value);
   if (f.question.value) {
@@ -45,7 +47,9 @@ function query() {
 async function load() {
   clearTimeout(recheck);
   const page = await api(`${root.dataset.frames}?${query()}`);
-  Object.assign(view, { items: page.items, total: page.total, questions: page.questions, focus: 0, anchor: null });
+  Object.assign(view, { items: page.items, total: page.total, questions: page.questions, focus: 0, anchor: null,
+                        prev: page.prev, next: page.next });
+  if (!page.prev) view.offset = 0;
   view.selected.clear();
   page.items.forEach((item) => latest.set(item.id, item));
   const hadFocus = document.activeElement === document.body || grid.contains(document.activeElement);
@@ -54,10 +58,10 @@ async function load() {
     grid.append(el("li", { className: "empty", role: "none" }, "No frames here — looking again every few seconds."));
     recheck = setTimeout(() => enqueue(load), EMPTY_RECHECK_MS);
   }
-  $("review-range").textContent = page.total ? `${view.offset + 1}–${view.offset + page.items.length} of ${page.total}`
-                                             : "0 of 0";
-  $("prev-page").disabled = view.offset === 0;
-  $("next-page").disabled = view.offset + page.items.length >= page.total;
+  $("review-range").textContent = page.total
+    ? `${view.offset + 1}–${view.offset + page.items.length} of ${page.total}${page.total_exact ? "" : "+"}` : "0 of 0";
+  $("prev-page").disabled = !page.prev;
+  $("next-page").disabled = !page.next;
   history.replaceState(null, "", urlFor(query()));
   paint();
   if (hadFocus) focusTile();
@@ -236,7 +240,7 @@ function page(direction) {
   enqueue(async () => {
     const next = pageOffset(view, direction, PAGE, inFilter);
     if (typeof next === "string") return say(next);
-    view.offset = next;
+    Object.assign(view, next);
     await load();
   });
 }
@@ -433,7 +437,7 @@ for (const [id, run] of Object.entries({
 
 filters.addEventListener("change", () => {
   filters.elements.answer.disabled = !filters.elements.question.value;
-  view.offset = 0;
+  Object.assign(view, { offset: 0, after: null, before: null });
   enqueue(load);
 });
 
@@ -445,6 +449,7 @@ function restore() {
   }
   filters.elements.answer.disabled = !filters.elements.question.value;
   view.offset = Math.max(0, Number(params.get("offset")) || 0);
+  Object.assign(view, { after: params.get("after"), before: params.get("before") });
 }
 
 restore();

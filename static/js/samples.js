@@ -1,7 +1,7 @@
 // The samples grid: keyboard-first accept/reject of generated samples, filters, paging, and a way
 // into each sample's page and 3D preview. Decisions run one after another, in key order.
 import { api, el } from "./api.js";
-import { focusTile as focusGridTile, pageOffset, serial, stepOf } from "./grid.js";
+import { focusTile as focusGridTile, pageOffset, serial, setCursor, stepOf } from "./grid.js";
 import { keyFigures, reasonPicker, review } from "./sample_review.js";
 
 const $ = (id) => document.getElementById(id);
@@ -19,7 +19,7 @@ const THUMBS = ["masks", "disparity_after", "anaglyph"];
 const STEPS = { ArrowLeft: "left", h: "left", ArrowRight: "right", l: "right", ArrowUp: "up", k: "up",
                 ArrowDown: "down", j: "down" };
 
-const view = { items: [], total: 0, offset: 0, focus: 0 };
+const view = { items: [], total: 0, offset: 0, focus: 0, after: null, before: null, prev: null, next: null };
 // ?evaluation=ID&sort=error[&method=M&region=R]: the evaluation's samples, worst first (kept in the address).
 const BY_ERROR = ["evaluation", "sort", "method", "region", "min_error"];
 const byError = new URLSearchParams([...new URLSearchParams(location.search)].filter(([k]) => BY_ERROR.includes(k)));
@@ -32,6 +32,7 @@ const enqueue = serial((err) => say(err.message, "error"));
 function query() {
   const f = filters.elements;
   const params = new URLSearchParams({ limit: PAGE, offset: view.offset });
+  setCursor(params, view);
   if (f.state.value !== "all") params.set("state", f.state.value);
   if (f.flagged.value) params.set("flagged", f.flagged.value);
   if (byError.has("evaluation")) byError.forEach((value, key) => params.set(key, value));
@@ -40,7 +41,8 @@ function query() {
 
 async function load(focusId) {
   const page = await api(`${root.dataset.list}?${query()}`);
-  Object.assign(view, { items: page.items, total: page.total });
+  Object.assign(view, { items: page.items, total: page.total, prev: page.prev, next: page.next });
+  if (!page.prev) view.offset = 0;
   view.focus = Math.max(0, view.items.findIndex((s) => s.id === focusId));
   grid.replaceChildren(...page.items.map((s) => renderTile(el("li", { className: "tile", role: "listitem" }), s)));
   if (!page.items.length) {
@@ -49,8 +51,8 @@ async function load(focusId) {
   }
   $("samples-range").textContent = page.total
     ? `${view.offset + 1}–${view.offset + page.items.length} of ${page.total}` : "0 of 0";
-  $("prev-page").disabled = view.offset === 0;
-  $("next-page").disabled = view.offset + page.items.length >= page.total;
+  $("prev-page").disabled = !page.prev;
+  $("next-page").disabled = !page.next;
   history.replaceState(null, "", address());
   paint();
   focusTile();
@@ -64,6 +66,7 @@ function address() {
   if (f.flagged.value) params.set("flagged", f.flagged.value);
   if (f.thumb.value !== THUMBS[0]) params.set("thumb", f.thumb.value);
   if (view.offset) params.set("offset", view.offset);
+  setCursor(params, view);
   const focused = view.items[view.focus];
   if (focused && view.focus) params.set("focus", focused.id);
   return params.size ? `?${params}` : location.pathname;
@@ -128,7 +131,7 @@ function page(direction) {
   enqueue(async () => {
     const next = pageOffset(view, direction, PAGE, inFilter);
     if (typeof next === "string") return say(next);
-    view.offset = next;
+    Object.assign(view, next);
     await load();
   });
 }
@@ -257,7 +260,7 @@ for (const [id, run] of Object.entries(BUTTONS)) {
 
 filters.addEventListener("change", (event) => {
   if (event.target.name === "thumb") return showThumbs();
-  view.offset = 0;
+  Object.assign(view, { offset: 0, after: null, before: null });
   enqueue(() => load());
 });
 
@@ -271,6 +274,7 @@ function restore() {
     if (params.has(name)) filters.elements[name].value = params.get(name);
   }
   view.offset = Math.max(0, Number(params.get("offset")) || 0);
+  Object.assign(view, { after: params.get("after"), before: params.get("before") });
   return Number(params.get("focus")) || undefined;
 }
 

@@ -82,7 +82,7 @@ def openapi_document() -> dict[str, Any]:
                                            _q("limit", desc="1..10000, default 100"), _q("offset"), *_CURSORS])},
             "/videos": {
                 "get": _op("List videos with their frame counts, newest first", "annotator", schema="VideoList",
-                           params=[_q("limit", desc="1..1000, default 500"), *_CURSORS]),
+                           params=[_q("limit", desc="1..1000, default 100"), *_CURSORS]),
                 "post": _op("Upload a video (multipart: file, fps, source, illusion_type…); starts an ingest job",
                             "curator", body="VideoUpload", ok="202", schema="Job"),
             },

@@ -46,8 +46,11 @@ def _samples_by_error(evaluation_id: int) -> dict[str, object]:
     items, total = evaluations.samples_by_error(
         g.db, evaluation_id, method=request.args.get("method") or None, region=request.args.get("region") or "all",
         metric=SORTS[sort], min_error=min_error, limit=limit, offset=offset)
+    # An evaluation's order pages by offset (see samples_by_error); its cursors are offsets too, so
+    # the grid's prev/next work alike (the grid sends ``offset`` with every page).
     more = offset + len(items) < total
-    return {"items": items, "total": total, "prev": None, "next": None, "offset": offset, "more": more}
+    return {"items": items, "total": total, "offset": offset, "more": more,
+            "prev": str(max(0, offset - limit)) if offset else None, "next": str(offset + len(items)) if more else None}
 
 
 @api.get("/samples/<int:sample_id>")

@@ -25,7 +25,7 @@ from webapp.runtime import runtime
 @api.get("/videos")
 @requires(Role.annotator)
 def list_videos() -> ResponseReturnValue:
-    limit = min(max(int_arg("limit", 500) or 500, 1), 1000)
+    limit = min(max(int_arg("limit", 100) or 100, 1), 1000)
     page = keyset_page(g.db, select(Video, Video.id), (Video.id,), limit=limit, descending=True, **cursor_args())
     videos = [row[0] for row in page.rows]
     counts = dict(g.db.execute(select(FrameCount.video_id, func.sum(FrameCount.n))

@@ -27,9 +27,9 @@ from typing import Any
 import httpx
 import numpy as np
 from alembic import command
-from sqlalchemy import Connection, create_engine, make_url, text
+from sqlalchemy import Connection, text
 
-from dataset.db import alembic_config, make_engine, make_session_factory, normalise_url, transaction
+from dataset.db import alembic_config, make_engine, make_session_factory, scratch_database, transaction
 from dataset.models import User
 from dataset.services import jobs as job_service
 from dataset.services import users as user_service
@@ -71,17 +71,8 @@ def _database(backend: str, server_url: str | None, tmp: Path) -> Iterator[str]:
     if backend == "sqlite":
         yield f"sqlite:///{tmp / 'illusion-studio.db'}"
         return
-    server = make_url(normalise_url(server_url or ""))
-    admin = create_engine(server.set(database="postgres"), isolation_level="AUTOCOMMIT")
-    with admin.connect() as conn:
-        conn.execute(text(f"DROP DATABASE IF EXISTS {BENCH_DATABASE} WITH (FORCE)"))
-        conn.execute(text(f"CREATE DATABASE {BENCH_DATABASE}"))
-    try:
-        yield server.set(database=BENCH_DATABASE).render_as_string(hide_password=False)
-    finally:
-        with admin.connect() as conn:
-            conn.execute(text(f"DROP DATABASE IF EXISTS {BENCH_DATABASE} WITH (FORCE)"))
-        admin.dispose()
+    with scratch_database(server_url or "", BENCH_DATABASE) as url:
+        yield url
 
 
 def _measure(home: Path, url: str, n: int, repeats: int) -> dict[str, Any]:

@@ -62,8 +62,8 @@ def generate_benchmark(as_json: bool, repeats: int) -> None:
 @click.option("--frames", type=click.IntRange(min=1000), default=1_400_000, show_default=True,
               help="Frames to seed (the paper curated 1.4M); the routes are also timed at a tenth of it.")
 @click.option("--database-url", default=None,
-              help="A PostgreSQL server (postgresql://user@host:port/any): the bench creates, uses and drops "
-                   "its own database there (bench_scale). SQLite is always measured.")
+              help="A PostgreSQL server, e.g. postgresql://postgres@127.0.0.1:5432/postgres (its database only serves "
+                   "to connect): the bench creates, uses and drops its own database bench_scale. SQLite is always measured.")
 @click.option("--repeats", type=click.IntRange(min=2), default=20, show_default=True, help="Timed calls per route.")
 def scale_benchmark(as_json: bool, frames: int, database_url: str | None, repeats: int) -> None:
     """p50/p95 of every list and queue route with N frames seeded, beside the same at N/10."""
