@@ -112,5 +112,7 @@ def test_openapi_document_lists_exactly_the_api_routes(app, client, tokens) -> N
 
 def test_healthz_and_funnel(client, tokens) -> None:  # type: ignore[no-untyped-def]
     assert client.get("/healthz").json == {"status": "ok"}
+    icon = client.get("/favicon.ico")  # browsers ask before reading the page: no 404 in every console
+    assert icon.status_code == 200 and icon.mimetype == "image/svg+xml" and b"<svg" in icon.data
     funnel = client.get("/api/v1/stats/funnel", headers={"Authorization": f"Bearer {tokens['annotator']}"}).json
     assert list(funnel) == ["videos", "frames", "prefiltered", "approved", "annotated", "generated", "accepted"]

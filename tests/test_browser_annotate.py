@@ -145,6 +145,11 @@ def test_annotator_clicks_pairs_submits_and_a_second_annotator_works_alongside(b
         band = truth(home, frame["index"], "support_00")
         click_image(page, *interior(band))
         page.wait_for_function("window.annotator.pairs[0].support > 0")
+        page.keyboard.press("Enter")  # no type yet: the dialog asks, with its first type focused
+        expect(page.locator("#type-dialog")).to_be_visible()
+        expect(page.locator("#type-dialog .choice").first).to_be_focused()
+        page.keyboard.press("Escape")  # a dismissed submit says why nothing happened
+        expect(page.locator("#message")).to_have_text(re.compile(r"^Not submitted: it needs an illusion type"))
         page.keyboard.press("t")
         expect(page.locator("#type-dialog")).to_be_visible()
         page.keyboard.press("2")
@@ -154,6 +159,19 @@ def test_annotator_clicks_pairs_submits_and_a_second_annotator_works_alongside(b
         page.wait_for_function("window.annotator.pairs[0].type === 'mirror'")
         page.locator("#canvas").focus()
         page.screenshot(path=str(SHOTS / "annotate-1-pair.png"))
+
+        # on a laptop screen with two planes, the frame's actions stay in view (a sticky bar)
+        page.set_viewport_size({"width": 1366, "height": 768})
+        page.keyboard.press("n")
+        assert len(page.evaluate("window.annotator.pairs")) == 2
+        for button in ("#submit", "#delete"):
+            assert page.evaluate("""(sel) => { const b = document.querySelector(sel).getBoundingClientRect();
+                const hit = document.elementFromPoint(b.left + b.width / 2, b.top + b.height / 2);
+                return b.bottom <= innerHeight && hit?.closest(sel) !== null; }""", button), button
+        page.screenshot(path=str(SHOTS / "annotate-1366.png"))
+        page.keyboard.press("Backspace")  # the empty plane goes again
+        assert len(page.evaluate("window.annotator.pairs")) == 1
+        page.set_viewport_size({"width": 1400, "height": 860})
 
         page.keyboard.press("Enter")
         after = shown_frame(page, other_than=frame["id"])

@@ -91,6 +91,19 @@ def test_curator_reviews_frames_with_the_keyboard_and_the_funnel_follows(browser
         assert by_id[ids[2]]["last_review"]["reason"] == "blurry"
         assert by_id[ids[2]]["last_review"]["user"] == "curator"
 
+        # the default prefilter visibly decides: it says what it does not answer, and drops the demo's
+        # captioned and blurred frames
+        note = page.locator("#backend-note")
+        expect(note).to_contain_text("answers only Q7 (excessive watermark/caption), Q8 (corner watermark/caption), "
+                                     "Q9 (too blurry)")
+        expect(note).to_contain_text("the other 9 questions to you")
+        page.select_option("#review-filters select[name=state]", "rejected")
+        page.select_option("#review-filters select[name=keep]", "false")
+        expect(page.locator("#review-range")).to_have_text("1–2 of 2")
+        reasons = page.locator("#review-grid .tile .verdict").evaluate_all("nodes => nodes.map(n => n.title)")
+        assert sorted(r.split(" (")[0] for r in reasons) == ["rejected: Q7", "rejected: Q9"], reasons
+        page.screenshot(path=str(tmp_path / "review-dropped.png"))
+
         page.click("[data-nav=dashboard]")
         expect(page.locator("[data-stage=approved] .count")).to_have_text(str(approved_before + 2))
         assert errors == []

@@ -92,7 +92,8 @@ def test_demo_without_serving_builds_a_complete_workspace(tmp_path: Path) -> Non
     assert "4 of 4 jobs succeeded" in result.stdout and "6 of 6 jobs succeeded" in result.stdout
     frames = json.loads(cli("--data-dir", str(home), "frames", "list", "--json").stdout)
     states = [f["state"] for f in frames]
-    assert len(frames) == 24
+    assert len(frames) == 28
     assert states.count("generated") == 6 and states.count("approved") == 6 and states.count("prefiltered") == 12
+    assert states.count("rejected") == 4  # each video's captioned and blurred frames, by the heuristic prefilter
     again = cli("--data-dir", str(home), "demo", "--no-serve", "--videos", "2")
     assert again.returncode == 0 and "jobs succeeded" not in again.stdout  # nothing to do twice

@@ -98,8 +98,16 @@ def test_a_failing_job_records_a_readable_reason(runtime: Runtime, tmp_path: Pat
     assert state == JobState.failed
     with runtime.sessions() as s:
         job = s.get(Job, job_id)
-        assert job.error.startswith("IngestError:") and "no such file" in job.error
-        assert "Traceback" in job.log
+        # for people: what went wrong and which file, not the server's folders nor the class name
+        assert job.error in ("nowhere: no such file", "nowhere: no such file or directory"), job.error
+        assert not job.error.startswith("IngestError") and "IngestError" in job.log and "Traceback" in job.log
+
+
+def test_user_error_keeps_messages_short_and_names_bugs() -> None:
+    assert job_service.user_error(ValueError("/srv/ws/media/81/d7/ab12.mp4: cannot decode\nmore")) == "ab12.mp4: cannot decode"
+    assert job_service.user_error(KeyError("frame_ids")) == "KeyError: 'frame_ids'"
+    assert job_service.user_error(RuntimeError()) == "RuntimeError"
+    assert len(job_service.user_error(ValueError("x" * 1000))) == 300
 
 
 def test_redelivered_job_runs_once(runtime: Runtime, tmp_path: Path) -> None:

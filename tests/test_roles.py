@@ -14,11 +14,13 @@ from tests.conftest import login
 PUBLIC = None
 EXPECTED: dict[str, Role | None] = {
     "auth.healthz": PUBLIC,
+    "auth.favicon": PUBLIC,
     "auth.login": PUBLIC,
     "auth.logout": Role.annotator,
     "dashboard.dashboard": Role.annotator,
     "dashboard.frames": Role.annotator,
     "jobs.jobs": Role.annotator,
+    "jobs.job": Role.annotator,
     "annotate.annotate": Role.annotator,
     "review.review": Role.curator,
     "ingest.ingest": Role.curator,
@@ -126,7 +128,7 @@ def test_session_login_sees_the_same_matrix_for_pages(app, caller: str) -> None:
     client = app.test_client()
     assert login(client, caller).status_code == 302
     for endpoint, method, path in _routes(app):
-        if method != "GET" or endpoint in ("auth.login", "auth.healthz"):
+        if method != "GET" or endpoint in ("auth.login", "auth.healthz", "auth.favicon"):
             continue
         status = client.get(path).status_code
         if Role(caller).allows(EXPECTED[endpoint]):

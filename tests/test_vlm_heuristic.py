@@ -2,27 +2,20 @@
 
 from __future__ import annotations
 
+import json
+
 import cv2
 import numpy as np
 import pytest
 
-from annotation.vlm import PROMPT_VERSION, PrefilterBackend, make_backend
-from dataset.synthetic import render_video
+from annotation.vlm import PROMPT_VERSION, PrefilterBackend, answered_questions, make_backend
+from dataset.synthetic import read_video, render_video, write_synthetic_dataset
+from dataset.synthetic.defects import blur, caption
 
 
 @pytest.fixture(scope="module")
 def sharp() -> np.ndarray:
     return render_video(0, n_frames=2, width=320, height=180).frames[0].left
-
-
-def with_caption_band(rgb: np.ndarray) -> np.ndarray:
-    """A black band over the bottom fifth holding a line of white subtitle text."""
-    out = rgb.copy()
-    h, w = out.shape[:2]
-    cv2.rectangle(out, (0, int(h * 0.78)), (w, h), (0, 0, 0), -1)
-    origin, font, white = (w // 20, int(h * 0.93)), cv2.FONT_HERSHEY_SIMPLEX, (255, 255, 255)
-    cv2.putText(out, "SUBTITLE TEXT HERE", origin, font, w / 400, white, 2, cv2.LINE_AA)
-    return out
 
 
 def test_sharp_clean_frame_goes_to_a_curator_with_its_figures(sharp: np.ndarray) -> None:
@@ -40,14 +33,14 @@ def test_sharp_clean_frame_goes_to_a_curator_with_its_figures(sharp: np.ndarray)
 
 
 def test_blurred_frame_is_rejected_as_too_blurry(sharp: np.ndarray) -> None:
-    [verdict] = make_backend("heuristic").classify([cv2.GaussianBlur(sharp, (0, 0), 3)])
+    [verdict] = make_backend("heuristic").classify([blur(sharp)])
     assert verdict.answers is not None and verdict.answers[8] is True
     assert verdict.keep is False and "Q9" in verdict.reason
     assert verdict.metrics["laplacian_var_p90"] < 60
 
 
 def test_caption_band_is_rejected_as_excessive_captions(sharp: np.ndarray) -> None:
-    [verdict] = make_backend("heuristic").classify([with_caption_band(sharp)])
+    [verdict] = make_backend("heuristic").classify([caption(sharp)])
     assert verdict.answers is not None
     assert verdict.answers[6] is True and verdict.answers[7] is False
     assert verdict.keep is False and "Q7" in verdict.reason
@@ -82,3 +75,17 @@ def test_registry_builds_the_heuristic_and_explains_bad_choices(tmp_path) -> Non
         make_backend("openai", model="m")
     with pytest.raises(ValueError, match="model name"):
         make_backend("openai", base_url="http://127.0.0.1:1/v1")
+
+
+def test_registry_says_which_questions_a_backend_answers() -> None:
+    assert answered_questions("heuristic") == (7, 8, 9)
+    assert answered_questions("openai") == answered_questions("transformers") == tuple(range(1, 13))
+
+
+def test_demo_videos_end_with_frames_the_heuristic_drops(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    [path] = write_synthetic_dataset(tmp_path, videos=1, n_frames=1, width=320, height=180, defects=True)
+    scene = json.loads((path / "scene.json").read_text())
+    assert [f.get("defect") for f in scene["frames"]] == [None, "caption", "blur"]
+    verdicts = make_backend("heuristic").classify([f.left for f in read_video(path).frames])
+    assert [v.keep for v in verdicts] == [None, False, False]
+    assert "Q7" in verdicts[1].reason and "Q9" in verdicts[2].reason

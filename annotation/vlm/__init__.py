@@ -4,7 +4,7 @@ their sparse sampling, and backends (heuristic default, OpenAI-compatible server
 No Flask, DB or settings here: callers pass configuration in (see ``make_backend``).
 """
 
-from annotation.vlm.backends import BACKEND_NAMES, PrefilterBackend, make_backend
+from annotation.vlm.backends import BACKEND_NAMES, PrefilterBackend, answered_questions, make_backend
 from annotation.vlm.parse import ParsedAnswers, format_answers, parse_answers
 from annotation.vlm.prompt import PROMPT, PROMPT_VERSION, QUESTION_LABELS, QUESTIONS
 from annotation.vlm.rule import KeepRule
@@ -21,6 +21,7 @@ __all__ = [
     "ParsedAnswers",
     "PrefilterBackend",
     "Verdict",
+    "answered_questions",
     "format_answers",
     "make_backend",
     "parse_answers",

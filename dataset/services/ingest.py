@@ -57,7 +57,8 @@ def ingest_video(ctx: JobContext) -> dict[str, Any]:
         if video is not None and video.meta.get("ingest") == "complete":
             n = s.scalar(select(func.count()).select_from(Frame).where(Frame.video_id == video.id))
             ctx.log(f"already ingested as video {video.id}; nothing to do")
-            return {"video_id": video.id, "frames": n, "new_frames": 0, "dropped_duplicates": 0, "skipped": True}
+            return {"video_id": video.id, "video_name": video.name, "frames": n, "new_frames": 0,
+                    "dropped_duplicates": 0, "skipped": True}
         if video is None:
             video = Video(
                 name=p.get("original_name") or Path(p["path"]).name,

@@ -7,6 +7,7 @@ job survives a restarted queue, and a job whose worker died is found and made re
 from __future__ import annotations
 
 import os
+import re
 import socket
 import time
 import traceback
@@ -21,7 +22,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from dataset.db import transaction
 from dataset.media import MediaStore
 from dataset.models import Job, JobState, User, utcnow
-from dataset.services.errors import Conflict, NotFound
+from dataset.services.errors import Conflict, NotFound, ServiceError
 from dataset.settings import Settings
 
 LOG_LIMIT = 200_000  # characters kept of a job's log; the head is dropped first
@@ -45,6 +46,22 @@ def get_job(session: Session, job_id: int) -> Job:
     if job is None:
         raise NotFound(f"no job {job_id}")
     return job
+
+
+_ABSOLUTE_PATH = re.compile(r"(?<![\w.])/(?:[^\s/:'\"]+/)+([^\s/:'\"]+)")
+_ERROR_CHARS = 300
+
+
+def user_error(exc: BaseException) -> str:
+    """What a failed job tells its user: the exception's first line, absolute paths cut to their
+    file name (server folders are no business of the page), at most _ERROR_CHARS characters.
+    Bad-input errors (ValueError, OSError, ServiceError) are worded for people and shown bare;
+    any other exception is a bug and keeps its class name. The full traceback stays in the log."""
+    text = (str(exc).strip().splitlines() or [""])[0]
+    if not isinstance(exc, (ValueError, OSError, ServiceError)) or not text:
+        text = f"{type(exc).__name__}: {text}".rstrip(": ")
+    text = _ABSOLUTE_PATH.sub(r"\1", text)
+    return text if len(text) <= _ERROR_CHARS else text[:_ERROR_CHARS - 1] + "…"
 
 
 def job_json(job: Job, *, with_log: bool = False) -> dict[str, Any]:
@@ -207,7 +224,7 @@ def execute_job(job_id: int, handlers: dict[str, Handler], env: JobEnv) -> JobSt
         result = handler(ctx)
     except Exception as exc:  # a job's failure is data for the user, not a worker crash
         ctx.finish(traceback.format_exc())
-        return _finish(sessions, job_id, me, state=JobState.failed, error=f"{type(exc).__name__}: {exc}")
+        return _finish(sessions, job_id, me, state=JobState.failed, error=user_error(exc))
     ctx.finish(None, progress=1.0)
     return _finish(sessions, job_id, me, state=JobState.succeeded, result=result)
 

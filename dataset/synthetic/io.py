@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 
 from dataset.atomic import atomic_write_bytes
+from dataset.synthetic.defects import DEFECT_FRAMES, spoil_last_frames
 from dataset.synthetic.records import RegionPair, SyntheticFrame, SyntheticVideo
 from dataset.synthetic.render import render_video
 
@@ -77,8 +78,9 @@ def _write_mp4(path: Path, frames: list[np.ndarray], fps: float) -> None:
         raise
 
 
-def write_video(video: SyntheticVideo, out_dir: Path) -> Path:
-    """Write ``video`` under ``out_dir / video.name`` and return that folder."""
+def write_video(video: SyntheticVideo, out_dir: Path, defects: dict[int, str] | None = None) -> Path:
+    """Write ``video`` under ``out_dir / video.name`` and return that folder; ``defects`` (frame
+    index → defect name, see dataset.synthetic.defects) is recorded in scene.json."""
     root = Path(out_dir) / video.name
     (root / "frames").mkdir(parents=True, exist_ok=True)
     _write_mp4(root / "video.mp4", [f.left for f in video.frames], video.fps)
@@ -107,7 +109,8 @@ def write_video(video: SyntheticVideo, out_dir: Path) -> Path:
                        "view, a left pixel (u, v) matching right pixel (u - d, v)",
         "pairs": [{"pair": r.pair, "kind": r.kind, "illusion_type": r.illusion_type}
                   for r in video.frames[0].regions],
-        "frames": [{"index": f.index, "time_s": f.time_s} for f in video.frames],
+        "frames": [{"index": f.index, "time_s": f.time_s, **({"defect": defects[f.index]} if f.index in (defects or {})
+                                                              else {})} for f in video.frames],
         "files": _FILES,
     }
     atomic_write_bytes(root / "scene.json", (json.dumps(scene, indent=2) + "\n").encode())
@@ -148,7 +151,14 @@ def read_video(video_dir: Path) -> SyntheticVideo:
 
 
 def write_synthetic_dataset(out_dir: Path, videos: int = 3, seed: int = 0, n_frames: int = 12,
-                            width: int = 640, height: int = 360) -> list[Path]:
-    """Render and write ``videos`` videos (video k from seed ``seed + k``); their folders."""
-    return [write_video(render_video(seed + k, n_frames, width, height), out_dir)
-            for k in range(videos)]
+                            width: int = 640, height: int = 360, *, defects: bool = False) -> list[Path]:
+    """Render and write ``videos`` videos (video k from seed ``seed + k``); their folders.
+    ``defects``: add DEFECT_FRAMES spoilt frames (a caption, a blur) to each video's ``n_frames``
+    clean ones, for the prefilter to catch."""
+    paths = []
+    for k in range(videos):
+        video, spoilt = render_video(seed + k, n_frames + (DEFECT_FRAMES if defects else 0), width, height), {}
+        if defects:
+            video, spoilt = spoil_last_frames(video)
+        paths.append(write_video(video, out_dir, spoilt))
+    return paths

@@ -1,6 +1,7 @@
 // Uploads videos one by one with a byte progress bar (XHR: fetch has no upload progress),
 // then follows each ingest job's progress until it finishes.
 import { api, el, poll } from "./api.js";
+import { summary } from "./job_summary.js";
 
 const form = document.getElementById("upload");
 const list = document.getElementById("uploads");
@@ -31,20 +32,33 @@ function follow(job, row) {
   const stop = poll(async () => {
     const current = await api(`${form.dataset.jobs}/${job.id}`);
     bar.value = current.progress;
-    label.textContent = `ingest job ${current.id}: ${current.state}`;
-    if (current.state === "succeeded") {
-      label.textContent += ` — ${current.result.frames} frames (${current.result.dropped_duplicates} near-duplicates dropped)`;
-      stop();
-    } else if (["failed", "interrupted"].includes(current.state)) {
-      label.textContent += ` — ${current.error}`;
-      row.classList.add("failed");
+    const done = ["succeeded", "failed", "interrupted"].includes(current.state);
+    label.replaceChildren(el("a", { href: `${form.dataset.jobPage}${current.id}` }, `ingest job #${current.id}`),
+                          `: ${current.state}${done ? ` — ${summary(current)}` : ""}`);
+    if (done) {
+      row.classList.toggle("failed", current.state !== "succeeded");
       stop();
     }
   }, 1000);
 }
 
+const button = form.querySelector("button[type=submit]");
+
 form.addEventListener("submit", async (event) => {
   event.preventDefault();
+  if (button.disabled) return;  // a double click sends the files once
+  button.disabled = true;
+  button.textContent = "Uploading…";
+  try {
+    await uploadAll();
+  } finally {
+    button.disabled = false;
+    button.textContent = "Upload and ingest";
+    form.reset();
+  }
+});
+
+async function uploadAll() {
   const files = [...form.elements.file.files];
   // An unchecked box sends nothing, and the API's default is to prefilter: always say it explicitly.
   const fields = [...new FormData(form)].filter(([key]) => !["file", "prefilter"].includes(key));
@@ -67,5 +81,4 @@ form.addEventListener("submit", async (event) => {
       row.classList.add("failed");
     }
   }
-  form.reset();
-});
+}

@@ -129,7 +129,7 @@ def demo(state: CliState, no_serve: bool, videos: int, host: str | None, port: i
     video_dirs = sorted(p for p in synth_dir.glob("synthetic-*") if (p / "scene.json").is_file())
     if len(video_dirs) < videos:
         click.echo(f"rendering {videos} synthetic videos into {synth_dir} …", err=True)
-        video_dirs = write_synthetic_dataset(synth_dir, videos=videos, seed=0)
+        video_dirs = write_synthetic_dataset(synth_dir, videos=videos, seed=0, defects=True)
 
     logins = []
     with transaction(rt.sessions) as s:

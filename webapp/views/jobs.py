@@ -15,3 +15,11 @@ bp = Blueprint("jobs", __name__)
 @requires(Role.annotator)
 def jobs() -> ResponseReturnValue:
     return render_template("jobs.html")
+
+
+@bp.get("/jobs/<int:job_id>")
+@requires(Role.annotator)
+def job(job_id: int) -> ResponseReturnValue:
+    """One job: progress, parameters, timings, log and links to what it made (filled in from the
+    API, which also decides who may see it)."""
+    return render_template("job.html", job_id=job_id)

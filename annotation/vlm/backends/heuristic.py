@@ -31,6 +31,7 @@ BLURRY_BELOW = 60.0
 SHARP_FROM = 300.0
 CAPTION_BAND_MIN = 0.05
 TEXT_AREA_MIN = 0.05
+ANSWERED = (7, 8, 9)  # the questions heuristic_answers can answer; the rest always stay unknown
 
 
 def heuristic_answers(figures: FrameFigures) -> tuple[bool | None, ...]:

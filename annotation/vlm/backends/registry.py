@@ -5,10 +5,16 @@ from __future__ import annotations
 from pathlib import Path
 
 from annotation.vlm.backends.base import PrefilterBackend
-from annotation.vlm.backends.heuristic import HeuristicBackend
+from annotation.vlm.backends.heuristic import ANSWERED, HeuristicBackend
+from annotation.vlm.prompt import N_QUESTIONS
 from annotation.vlm.rule import KeepRule
 
 BACKEND_NAMES = ("heuristic", "openai", "transformers")
+
+
+def answered_questions(name: str) -> tuple[int, ...]:
+    """The 1-based numbers of the questions backend ``name`` answers (a VLM answers all 12)."""
+    return ANSWERED if name == "heuristic" else tuple(range(1, N_QUESTIONS + 1))
 
 
 def make_backend(

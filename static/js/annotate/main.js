@@ -394,7 +394,7 @@ async function submit() {
   }
   if (!doc.type) {
     const type = await ask($("type-dialog"));
-    if (!type) return;
+    if (!type) return say("Not submitted: it needs an illusion type (T, or Enter again to choose).", "error");
     commit({ ...history.doc, type });
     return submit();
   }
@@ -402,7 +402,7 @@ async function submit() {
   if (noSupport.length) {
     $("confirm-title").textContent = `${noSupport.map((p) => pairName(p.id)).join(", ").replace(/^p/, "P")} `
       + `${noSupport.length === 1 ? "has" : "have"} no support region — submit anyway?`;
-    if (await ask($("confirm-dialog")) !== "yes") return;
+    if (await ask($("confirm-dialog")) !== "yes") return say("Not submitted: add the support, or submit anyway.");
   }
   say("Submitting…");
   const res = await session.submit(history.doc);

@@ -1,0 +1,52 @@
+// One job's page: state and progress, what it made, its parameters, timings and log, live until it ends.
+import { api, el, poll } from "./api.js";
+import { joined, madeLinks, summary } from "./job_summary.js";
+
+const root = document.getElementById("job");
+const $ = (id) => document.getElementById(id);
+const canReview = root.dataset.canReview === "true";
+const HIDDEN_PARAMS = new Set(["mask"]);  // a COCO RLE is no reading for a person
+
+const when = (iso) => (iso ? iso.replace("T", " ").slice(0, 19) : "—");
+function seconds(from, to) {
+  if (!from || !to) return "—";
+  const s = (Date.parse(to) - Date.parse(from)) / 1000;
+  return s < 60 ? `${s.toFixed(1)} s` : `${Math.floor(s / 60)} min ${Math.round(s % 60)} s`;
+}
+// server folders are no business of the page: a path shows as its file name
+const shown = (value, key) => (key === "path" ? String(value).split("/").pop() : plain(value));
+const plain = (value) => (typeof value === "object" && value !== null ? JSON.stringify(value) : String(value));
+
+function pairs(object) {
+  return Object.entries(object ?? {}).filter(([k]) => !HIDDEN_PARAMS.has(k))
+    .flatMap(([k, v]) => [el("dt", {}, k.replaceAll("_", " ")), el("dd", {}, v == null ? "—" : shown(v, k))]);
+}
+
+const stop = poll(async () => {
+  let job;
+  try {
+    job = await api(root.dataset.src);
+  } catch (err) {
+    $("job-summary").textContent = err.message;  // e.g. "no job 7" (or one this user may not see)
+    $("job-summary").classList.add("error");
+    throw err;
+  }
+  $("job-kind").textContent = `· ${job.kind}`;
+  $("job-state").textContent = job.state;
+  $("job-state").className = `state ${job.state}`;
+  $("job-progress").value = job.progress;
+  $("job-summary").textContent = summary(job);
+  $("job-summary").classList.toggle("error", job.state === "failed" || job.state === "interrupted");
+  $("job-made").replaceChildren(...joined(madeLinks(job, { canReview })));
+  $("job-made-row").hidden = !$("job-made").childNodes.length;
+  $("job-params").replaceChildren(...pairs(job.params));
+  $("job-result").replaceChildren(...pairs(job.result));
+  $("job-times").replaceChildren(
+    el("dt", {}, "created"), el("dd", {}, `${when(job.created_at)} by ${job.created_by ?? "the system"}`),
+    el("dt", {}, "started"), el("dd", {}, when(job.started_at)),
+    el("dt", {}, "finished"), el("dd", {}, when(job.finished_at)),
+    el("dt", {}, "took"), el("dd", {}, seconds(job.started_at, job.finished_at)),
+    el("dt", {}, "attempts"), el("dd", {}, String(job.attempts)));
+  $("job-log").textContent = job.log || "(nothing logged yet)";
+  if (["succeeded", "failed", "interrupted"].includes(job.state)) stop();
+}, 1500);
