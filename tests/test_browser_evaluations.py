@@ -16,7 +16,7 @@ from tests.conftest import PASSWORD, make_settings
 from tests.evaluations_data import evaluated_database
 from webapp.runtime import Runtime
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
 PICTURES_LOADED = "[...document.querySelectorAll('.evaluation-pictures img')].every(i => i.complete && i.naturalWidth > 0)"
 
 

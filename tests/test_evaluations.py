@@ -76,6 +76,9 @@ def test_samples_by_error_and_one_evaluated_sample(client, tokens, evaluated) ->
     headers = _auth(tokens, "annotator")
     page = client.get("/api/v1/samples?evaluation=1&sort=error&method=predictions&limit=4", headers=headers).json
     assert [i["id"] for i in page["items"]] == ids[::-1][:4] and page["total"] == len(ids) and page["more"]
+    assert (page["prev"], page["next"]) == (None, "4")  # offsets, as the grid's cursors
+    rest = client.get("/api/v1/samples?evaluation=1&method=predictions&limit=4&offset=4&after=4", headers=headers).json
+    assert [i["id"] for i in rest["items"]] == ids[::-1][4:] and (rest["prev"], rest["next"]) == ("0", None)
     assert page["items"][0]["evaluation"]["value"] == pytest.approx(STEP_PX * (len(ids) - 1), abs=1e-3)
     by_illusion = client.get("/api/v1/samples?evaluation=1&sort=bad2&region=illusion", headers=headers)
     assert by_illusion.status_code == 200 and by_illusion.json["items"][0]["evaluation"]["method"] == "predictions"
