@@ -46,6 +46,15 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def stop(proc: subprocess.Popen[str] | subprocess.Popen[bytes]) -> None:
+    """Terminate a server process, killing it if it has not gone in 30 s."""
+    proc.terminate()
+    try:
+        proc.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+
+
 @contextmanager
 def running_demo(home: Path, videos: int = 1) -> Iterator[str]:
     """`illusion-studio demo` in a subprocess (worker + server), as `make demo` runs it; yields its URL."""
@@ -71,11 +80,7 @@ def running_demo(home: Path, videos: int = 1) -> Iterator[str]:
             time.sleep(0.3)
         yield url
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
+        stop(proc)
 
 
 @contextmanager
@@ -97,11 +102,7 @@ def serving(home: Path, timeout_s: float = 60) -> Iterator[str]:
                 time.sleep(0.3)
         yield url
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
+        stop(proc)
 
 
 def login(page, url: str, name: str, password: str) -> None:  # type: ignore[no-untyped-def]
