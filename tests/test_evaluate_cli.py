@@ -51,3 +51,26 @@ def test_evaluate_without_data_or_model_is_one_clear_error(tmp_path: Path) -> No
     assert code != 0 and "test split" in stderr
     code, _, stderr = _cli(home, "evaluate", "--data", str(tmp_path), "--format", "kitti", "--here")
     assert code != 0 and "checkpoint" in stderr  # fusion by default, and no model promoted
+
+
+def test_fusion_predictions_bring_their_confidence(tmp_path: Path) -> None:
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from dataset.formats import read_pfm
+    from dataset.readers import StereoSample
+    from model.evaluation import SeenSamples
+    from model.report import PredictionWriter
+
+    image = np.zeros((4, 6, 3), np.uint8)
+    sample = StereoSample(name="a/b", left=image, right=image, disparity=np.ones((4, 6), np.float32),
+                          regions={"all": np.ones((4, 6), bool)}, mono=None, meta={"left": "a/b.png", "sample_id": 7})
+    confidence = np.linspace(0, 1, 24, dtype=np.float32).reshape(4, 6)
+    seen = SeenSamples(PredictionWriter(tmp_path), lambda s: SimpleNamespace(confidence=confidence))
+    seen("fusion", sample, np.full((4, 6), 2.0, np.float32))
+    seen("sgbm", sample, np.full((4, 6), 3.0, np.float32))
+    assert np.array_equal(read_pfm(tmp_path / "predictions" / "confidence" / "a" / "b.pfm"), confidence)
+    assert read_pfm(tmp_path / "predictions" / "sgbm" / "a" / "b.pfm")[0, 0] == 3.0
+    assert not (tmp_path / "predictions" / "confidence" / "sgbm").exists()
+    assert seen.sample_ids == {"a/b": 7} and seen.predictions == {"a/b": "a/b.pfm"}
