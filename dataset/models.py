@@ -278,6 +278,8 @@ class Region(Base):
     kind: Mapped[RegionKind] = mapped_column(_enum(RegionKind))
     mask_rle: Mapped[dict[str, Any]] = mapped_column(default=dict)
     clicks: Mapped[list[Any]] = mapped_column(default=list)
+    illusion_type: Mapped[IllusionType | None] = mapped_column(
+        _enum(IllusionType), doc="The pair's illusion type (a frame can hold a picture and a mirror); None: the annotation's.")
 
     annotation: Mapped[Annotation] = relationship(back_populates="regions")
 
@@ -406,6 +408,46 @@ class TrainingMetric(Base):
     kind: Mapped[str] = mapped_column(String(16), doc="step or val")
     step: Mapped[int]
     values: Mapped[dict[str, Any]] = mapped_column(default=dict)
+
+
+class Evaluation(Base):
+    """One evaluation job: methods on a dataset folder or a run's test split; the report lives in ``report_dir``."""
+
+    __tablename__ = "evaluations"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    job_id: Mapped[int | None] = mapped_column(ForeignKey("jobs.id", ondelete="SET NULL"), index=True)
+    created_by_id: Mapped[int | None] = mapped_column(ForeignKey("users.id", ondelete="SET NULL"))
+    created_at: Mapped[datetime] = mapped_column(default=utcnow, index=True)
+    dataset: Mapped[str] = mapped_column(Text, doc="The folder, or 'test split of <run dir>'.")
+    params: Mapped[dict[str, Any]] = mapped_column(default=dict, doc="The job's evaluation_params.")
+    summary: Mapped[dict[str, Any]] = mapped_column(default=dict, doc="method → region → {epe, bad2}; samples, failed.")
+    report_dir: Mapped[str | None] = mapped_column(Text)
+
+    job: Mapped[Job | None] = relationship()
+    created_by: Mapped[User | None] = relationship()
+
+
+class EvaluationResult(Base):
+    """One method's figures on one database sample: every region's metrics, and EPE / bad-2 on ``all``
+    and ``illusion`` as columns, indexed for sorting the Samples pages by error."""
+
+    __tablename__ = "evaluation_results"
+    __table_args__ = (UniqueConstraint("evaluation_id", "method", "sample_id", name="uq_evaluation_results_row"),
+                      Index("ix_evaluation_results_epe_all", "evaluation_id", "method", "epe_all", "sample_id"),
+                      Index("ix_evaluation_results_epe_illusion", "evaluation_id", "method", "epe_illusion",
+                            "sample_id"))
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    evaluation_id: Mapped[int] = mapped_column(ForeignKey("evaluations.id", ondelete="CASCADE"))
+    sample_id: Mapped[int] = mapped_column(ForeignKey("samples.id", ondelete="CASCADE"), index=True)
+    method: Mapped[str] = mapped_column(String(32))
+    regions: Mapped[dict[str, Any]] = mapped_column(default=dict, doc="region → metrics (EPE px, bad-x %).")
+    prediction: Mapped[str | None] = mapped_column(Text, doc="The PFM's path under the report's predictions/<method>/.")
+    epe_all: Mapped[float | None]
+    bad2_all: Mapped[float | None]
+    epe_illusion: Mapped[float | None]
+    bad2_illusion: Mapped[float | None]
 
 
 class AuditEntry(Base):

@@ -7,13 +7,17 @@ import json
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from dataset.db import transaction
 from dataset.formats import read_pfm
-from dataset.readers import READER_FORMATS, open_reader, resize_sample
+from dataset.readers import READER_FORMATS, StereoSample, open_reader, resize_sample
 from dataset.readers.version import VersionReader
+from dataset.services import evaluations
 from dataset.services.jobs import JobContext
 from model.align import ALIGN_RULES
 from model.evaluate import DEFAULT_THRESHOLDS, RESOLUTIONS, EvalOptions, evaluate, iter_reader
-from model.methods import NETWORK_METHODS, SgbmParams, build_methods, method_key
+from model.methods import NETWORK_METHODS, Mono, NetworkRuns, SgbmParams, build_methods, method_key
 from model.report import PredictionWriter, ranked_samples, write_pictures, write_report
 
 DEFAULT_METHODS = ("fusion", "stereo", "mono_gt_align", "sgbm")
@@ -89,31 +93,69 @@ def open_samples(params: dict[str, Any], media_root: Path) -> Any:
 
 def evaluate_job(ctx: JobContext) -> dict[str, Any]:
     """Job ``evaluate`` (params from :func:`evaluation_params`): writes the report folder, returns
-    the headline table (per method and region: EPE, bad-2) and where the report is."""
+    the headline table (per method and region: EPE, bad-2) and where the report is. The job's
+    ``evaluations`` row gets that summary and, for database samples, per-sample results."""
     p = ctx.params
     out = Path(p["out"]) if p["out"] else Path(ctx.settings.home) / "evaluations" / str(ctx.job_id)
+    with transaction(ctx.sessions) as s:
+        evaluation_id = evaluations.evaluation_for_job(s, ctx.job_id, p).id
     reader = open_samples(p, ctx.settings.media_root)
     ctx.log(f"{len(reader)} samples ({p['format']}), methods {', '.join(p['methods'])}, {p['resolution']} resolution")
+    mono_dir = Path(p["mono"]) if p["mono"] else None
+    runs = (NetworkRuns(Path(p["checkpoint"]), ctx.settings.device, Mono(mono_dir), p["iters"])
+            if p["checkpoint"] and any(m in NETWORK_METHODS for m in p["methods"]) else None)
     methods = build_methods(
         p["methods"], checkpoint=Path(p["checkpoint"]) if p["checkpoint"] else None,
-        predictions=Path(p["predictions"]) if p["predictions"] else None,
-        mono_dir=Path(p["mono"]) if p["mono"] else None, align_rule=p["align"],
-        sgbm=SgbmParams(max_disparity=p["max_disparity"]), device=ctx.settings.device, iters=p["iters"])
+        predictions=Path(p["predictions"]) if p["predictions"] else None, mono_dir=mono_dir, align_rule=p["align"],
+        sgbm=SgbmParams(max_disparity=p["max_disparity"]), device=ctx.settings.device, iters=p["iters"], runs=runs)
     writer = PredictionWriter(out, kitti_png=p["kitti_png"])
+    seen = SeenSamples(writer, runs)
     report = evaluate(
         iter_reader(reader), methods,
         EvalOptions(resolution=p["resolution"], thresholds=tuple(p["thresholds"])),
         total=len(reader), dataset=p["data"] or f"test split of {p['run_dir']}",
         on_progress=lambda i, n: ctx.progress(0.95 * i / n),
-        on_prediction=writer, on_failure=lambda s, m, why: ctx.log(f"skipped {s} {m}: {why}"))
+        on_prediction=seen, on_failure=lambda s, m, why: ctx.log(f"skipped {s} {m}: {why}"))
     report["params"] = {k: p[k] for k in ("format", "checkpoint", "align", "max_disparity", "iters", "run_dir")}
     if "sgbm" in p["methods"]:
         report["sgbm"] = SgbmParams(max_disparity=p["max_disparity"]).__dict__
-    write_report(out, report, _pictures(out, reader, report, writer))
-    ctx.progress(1.0, f"report in {out}/index.html; {len(report['failed'])} failures")
-    return {"out": str(out), "samples": report["samples"], "failed": len(report["failed"]),
-            "headline": {m: {r: {k: d["regions"][r].get(k) for k in ("epe", "bad2")} for r in d["regions"]}
-                         for m, d in report["methods"].items()}}
+    pictures = _pictures(out, reader, report, writer)
+    write_report(out, report, pictures)
+    result = {"out": str(out), "evaluation": evaluation_id, "samples": report["samples"],
+              "failed": len(report["failed"]), "pictures": pictures,
+              "headline": {m: {r: {k: d["regions"][r].get(k) for k in ("epe", "bad2")} for r in d["regions"]}
+                           for m, d in report["methods"].items()}}
+    with transaction(ctx.sessions) as s:
+        evaluation = evaluations.get_evaluation(s, evaluation_id)
+        rows = evaluations.record_results(s, evaluation, report, result, out, seen.sample_ids, seen.predictions)
+        evaluation.summary = {**result, "database_rows": rows}
+    ctx.progress(1.0, f"report in {out}/index.html; {len(report['failed'])} failures; {rows} database results")
+    return result
+
+
+class SeenSamples:
+    """The evaluation's prediction callback: writes each prediction (and, for ``fusion``, its
+    confidence as ``predictions/confidence/…``) and remembers each sample's database id and
+    prediction path for the per-sample results."""
+
+    def __init__(self, writer: PredictionWriter, runs: NetworkRuns | None) -> None:
+        self.writer, self.runs = writer, runs
+        self.sample_ids: dict[str, int] = {}
+        self.predictions: dict[str, str] = {}
+
+    def __call__(self, method: str, sample: StereoSample, pred: np.ndarray) -> None:
+        self.writer(method, sample, pred)
+        if method == "fusion" and self.runs is not None:
+            # The forward pass of this sample is cached: reading its confidence costs nothing.
+            self.writer("confidence", sample, self.runs(sample).confidence)
+        if "sample_id" in sample.meta:
+            self.sample_ids[sample.name] = int(sample.meta["sample_id"])
+        self.predictions[sample.name] = prediction_rel_path(sample)
+
+
+def prediction_rel_path(sample: StereoSample) -> str:
+    """Where :class:`PredictionWriter` puts a sample's prediction under ``predictions/<method>/``."""
+    return str(Path(str(sample.meta.get("left") or sample.name)).with_suffix(".pfm"))
 
 
 def _pictures(out: Path, reader: Any, report: dict[str, Any], writer: PredictionWriter) -> dict[str, list[str]]:
@@ -129,7 +171,7 @@ def _pictures(out: Path, reader: Any, report: dict[str, Any], writer: Prediction
             sample = reader[index[name]]
             factor = RESOLUTIONS[report["resolution"]]
             sample = sample if factor == 1.0 else resize_sample(sample, factor)
-            rel = Path(str(sample.meta.get("left") or sample.name)).with_suffix(".pfm")
+            rel = prediction_rel_path(sample)
             preds = {m: read_pfm(writer.out_dir / "predictions" / m / rel) for m in methods
                      if (writer.out_dir / "predictions" / m / rel).is_file()}
             pictures[f"{label}: {name}"] = write_pictures(out, sample, preds)

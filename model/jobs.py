@@ -1,4 +1,5 @@
-"""Job handlers of the model: ``train`` runs the engine under torchrun and mirrors its progress.
+"""Job handlers of the model: ``train`` runs the engine under torchrun and mirrors its progress;
+``evaluate`` (``model.evaluation``) writes an evaluation's report.
 
 No torch import here (the handler table loads eagerly, and torch lives in the trainers' processes).
 """
@@ -14,9 +15,11 @@ from dataset.models import Job
 from dataset.services import training
 from dataset.services.errors import InvalidInput, ServiceError
 from dataset.services.jobs import JobContext
+from model.evaluation import evaluate_job
 from model.launcher import ProcessGroup, device_env, torchrun_command
 
 POLL_S = 1.0
+__all__ = ["evaluate_job", "train_job", "resolve_config"]
 
 
 class RunEnded(ServiceError):

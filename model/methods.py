@@ -129,13 +129,13 @@ Predict = Callable[[StereoSample], np.ndarray]
 
 def build_methods(names: list[str], *, checkpoint: Path | None, predictions: Path | None, mono_dir: Path | None,
                   align_rule: AlignRule = "lsq", sgbm: SgbmParams = SgbmParams(), device: str = "cpu",
-                  iters: int | None = None) -> dict[str, Predict]:
+                  iters: int | None = None, runs: NetworkRuns | None = None) -> dict[str, Predict]:
     """The predictors for ``names`` (report keys), each StereoSample → float32 HxW pixels at the
-    sample's resolution. Raises ValueError naming what a method needs and was not given."""
+    sample's resolution. Raises ValueError naming what a method needs and was not given. ``runs``:
+    a caller's own :class:`NetworkRuns` (to read more of each prediction, e.g. the confidence)."""
     mono = Mono(mono_dir)
     methods: dict[str, Predict] = {}
-    runs: NetworkRuns | None = None
-    if any(n in NETWORK_METHODS for n in names):
+    if runs is None and any(n in NETWORK_METHODS for n in names):
         if checkpoint is None:
             raise ValueError("fusion, stereo and mono-align need a checkpoint (--checkpoint, or promote a run)")
         runs = NetworkRuns(checkpoint, device, mono, iters)

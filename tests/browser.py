@@ -46,6 +46,15 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def stop(proc: subprocess.Popen[str] | subprocess.Popen[bytes]) -> None:
+    """Terminate a server process, killing it if it has not gone in 30 s."""
+    proc.terminate()
+    try:
+        proc.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+
+
 @contextmanager
 def running_demo(home: Path, videos: int = 1) -> Iterator[str]:
     """`illusion-studio demo` in a subprocess (worker + server), as `make demo` runs it; yields its URL."""
@@ -71,11 +80,29 @@ def running_demo(home: Path, videos: int = 1) -> Iterator[str]:
             time.sleep(0.3)
         yield url
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
+        stop(proc)
+
+
+@contextmanager
+def serving(home: Path, timeout_s: float = 60) -> Iterator[str]:
+    """`illusion-studio serve` of the workspace ``home`` in a subprocess; yields its URL once it answers."""
+    port = free_port()
+    env = {k: v for k, v in os.environ.items() if not k.startswith("ILLUSION_STUDIO_")}
+    proc = subprocess.Popen([sys.executable, "-m", "webapp.cli", "--data-dir", str(home), "serve", "--port", str(port)],
+                            cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    url = f"http://127.0.0.1:{port}"
+    try:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            try:
+                with urllib.request.urlopen(f"{url}/healthz", timeout=2):
+                    break
+            except OSError:
+                assert proc.poll() is None and time.monotonic() < deadline, "server did not come up"
+                time.sleep(0.3)
+        yield url
+    finally:
+        stop(proc)
 
 
 def login(page, url: str, name: str, password: str) -> None:  # type: ignore[no-untyped-def]

@@ -9,7 +9,7 @@ from dataset.services import jobs as job_service
 from dataset.services import users as user_service
 from tests.conftest import csrf_from, login
 
-API_RULE = re.compile(r"<(?:int:)?(\w+)>")
+API_RULE = re.compile(r"<(?:\w+:)?(\w+)>")
 
 
 def test_login_logout_and_wrong_password(client) -> None:  # type: ignore[no-untyped-def]

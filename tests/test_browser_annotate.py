@@ -170,6 +170,10 @@ def test_annotator_clicks_pairs_submits_and_a_second_annotator_works_alongside(b
         expect(page.locator("#type-dialog")).to_be_visible()
         page.keyboard.press("2")
         expect(page.locator("#illusion-type")).to_have_value("picture")
+        # a pair may have a type of its own (a frame can hold a picture and a mirror)
+        page.select_option("#pairs [data-pair='1'] select.pair-type", "mirror")
+        page.wait_for_function("window.annotator.pairs[0].type === 'mirror'")
+        page.locator("#canvas").focus()
         page.screenshot(path=str(SHOTS / "annotate-1-pair.png"))
 
         # on a laptop screen with two planes, the frame's actions stay in view (a sticky bar)
@@ -197,6 +201,7 @@ def test_annotator_clicks_pairs_submits_and_a_second_annotator_works_alongside(b
         assert saved["illusion_type"] == "picture"
         regions = {(r["pair"], r["kind"]): r for r in saved["regions"]}
         assert set(regions) == {(1, "illusion"), (1, "support")}
+        assert {r["illusion_type"] for r in saved["regions"]} == {"mirror"}
         assert iou(decode(regions[1, "illusion"]["mask"]), picture) >= 0.7
         support = decode(regions[1, "support"]["mask"])
         assert support[interior(band)[::-1]] and (support & band).sum() > 0.5 * band.sum()

@@ -77,9 +77,18 @@ EXPECTED: dict[str, Role | None] = {
     "api.resume_run": Role.admin,
     "api.promote_run": Role.admin,
     "api.download_checkpoint": Role.curator,
+    "api.list_evaluations": Role.curator,
+    "api.get_evaluation": Role.curator,
+    "api.launch_evaluation": Role.curator,
+    "api.evaluation_file": Role.curator,
+    "evaluations.index": Role.curator,
+    "evaluations.report": Role.curator,
+    "evaluations.sample": Role.curator,
+    "evaluations.sample_image": Role.curator,
 }
 SAMPLE_ARGS = {"user_id": "1", "job_id": "1", "frame_id": "1", "sample_id": "1", "view": "anaglyph", "asset": "index.html",
-               "key": "ab/cd/" + "ab" * 32 + ".png", "run_id": "1", "name": "best.pt"}
+               "key": "ab/cd/" + "ab" * 32 + ".png", "run_id": "1", "name": "best.pt",
+               "evaluation_id": "1", "method": "fusion", "image": "error"}
 CALLERS = ["anonymous", *(r.value for r in Role)]
 
 

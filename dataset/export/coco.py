@@ -1,8 +1,8 @@
 """COCO-style annotations of a native export's split: one image per sample (its left view), one
 annotation per region mask with a compressed RLE ``segmentation`` (pycocotools).
 
-Categories are illusion/support per illusion type (``picture/illusion``, ``picture/support``, …,
-and ``unspecified/…`` for frames without a type); each annotation also carries
+Categories are illusion/support per illusion type of the pair (``picture/illusion``,
+``picture/support``, …, and ``unspecified/…`` for pairs without a type); each annotation also carries
 ``attributes: {pair, kind}`` so the pairs survive. The file is derived from the sample's mask
 PNGs, which stay the source of truth for import.
 """
@@ -17,6 +17,7 @@ import numpy as np
 from dataset.export.records import SampleRecord
 from dataset.formats import mask_to_rle
 from dataset.models import IllusionType, RegionKind
+from dataset.samples import mask_name
 
 UNSPECIFIED = "unspecified"
 TYPES = [t.value for t in IllusionType] + [UNSPECIFIED]
@@ -31,6 +32,11 @@ def categories() -> list[dict[str, Any]]:
 
 def category_id(illusion_type: str | None, kind: str) -> int:
     return 1 + TYPES.index(illusion_type or UNSPECIFIED) * len(KINDS) + KINDS.index(kind)
+
+
+def pair_type(record: SampleRecord, pair: int) -> str | None:
+    """The illusion type of one pair: what the sample recorded for it, else the frame's."""
+    return (record.provenance.get("pair_types") or {}).get(mask_name("illusion", pair)) or record.illusion_type
 
 
 def parse_mask_name(name: str) -> tuple[str, int]:
@@ -57,7 +63,7 @@ def coco_document(split: str, images: list[tuple[SampleRecord, str]],
             mask = load_mask(key)
             doc["annotations"].append({
                 "id": len(doc["annotations"]) + 1, "image_id": image_id,
-                "category_id": category_id(record.illusion_type, kind),
+                "category_id": category_id(pair_type(record, pair), kind),
                 "segmentation": mask_to_rle(mask), "area": int(mask.sum()), "bbox": _bbox(mask), "iscrowd": 0,
                 "attributes": {"pair": pair, "kind": kind},
             })

@@ -13,7 +13,7 @@ from typing import Literal
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from dataset.export.coco import parse_mask_name
+from dataset.export.coco import pair_type, parse_mask_name
 from dataset.export.records import SampleRecord
 from dataset.formats import mask_to_rle
 from dataset.media import MediaStore
@@ -91,6 +91,8 @@ def _annotation(media: MediaStore, frame_id: int, record: SampleRecord) -> Annot
     regions = []
     for name, key in sorted(record.files["masks"].items()):
         kind, pair = parse_mask_name(name)
-        regions.append(Region(pair=pair, kind=RegionKind(kind), mask_rle=mask_to_rle(load_output(media, key, "mask"))))
+        typed = pair_type(record, pair)
+        regions.append(Region(pair=pair, kind=RegionKind(kind), mask_rle=mask_to_rle(load_output(media, key, "mask")),
+                              illusion_type=IllusionType(typed) if typed else None))
     return Annotation(frame_id=frame_id, version=record.annotation_version, submitted=True, regions=regions,
                       illusion_type=IllusionType(record.illusion_type) if record.illusion_type else None)

@@ -45,7 +45,7 @@ class NativeReader(ListedReader):
                     if name.startswith("illusion_")}
         kind = "capture" if entry["provenance"].get("source") == "capture" else "synthesized"
         video = self.videos[entry["video"]]
-        types = pair_types(illusion, entry.get("illusion_type"))
+        types = pair_types(illusion, entry.get("illusion_type"), entry["provenance"].get("pair_types"))
         return StereoSample(
             name=entry["id"], left=read_rgb(self._path(files["left"])), right=read_rgb(self._path(files["right"])),
             disparity=disparity, regions=make_regions(disparity, illusion_regions(disparity.shape, illusion, types)),
@@ -61,10 +61,14 @@ class NativeReader(ListedReader):
         return self.root / spec["path"]
 
 
-def pair_types(illusion: Iterable[str], illusion_type: str | None) -> dict[str, str]:
-    """{illusion mask name: its illusion type}. Annotations carry one type per frame today, so
-    every pair gets the frame's type; a frame without one has no typed region."""
-    return {name: illusion_type for name in illusion} if illusion_type else {}
+def pair_types(illusion: Iterable[str], illusion_type: str | None,
+               recorded: Mapping[str, str] | None = None) -> dict[str, str]:
+    """{illusion mask name: its illusion type}: the type the sample recorded for that pair
+    (``provenance["pair_types"]``, written by generation and by rendered captures), else the
+    frame's; a mask with neither has no typed region."""
+    recorded = recorded or {}
+    types = {name: recorded.get(name) or illusion_type for name in illusion}
+    return {name: t for name, t in types.items() if t}
 
 
 def illusion_regions(shape: tuple[int, int], illusion: Mapping[str, np.ndarray],

@@ -188,7 +188,8 @@ def _newest_accepted(session: Session, video_ids: list[int] | None) -> Iterator[
 def _item(row: Any, video: Any) -> dict[str, Any]:
     capture = row.provenance.get("source") == "capture" or video.source_kind == SourceKind.real_capture
     frame_type = row.illusion_type.value if row.illusion_type is not None else row.provenance.get("illusion_type")
-    types = pair_types([name for name in row.files.get("masks", {}) if name.startswith("illusion_")], frame_type)
+    types = pair_types([name for name in row.files.get("masks", {}) if name.startswith("illusion_")], frame_type,
+                       row.provenance.get("pair_types"))
     camera = video_camera(video.meta) if capture else None
     return {
         "sample_id": row.id, "frame_id": row.frame_id, "frame_index": row.index, "video_id": row.video_id,

@@ -41,7 +41,8 @@ def frame_detail(session: Session, frame_id: int, user: User | Any) -> dict[str,
         "annotation_version": ann.version if ann else 0,
         "submitted": bool(ann and ann.submitted),
         "illusion_type": ann.illusion_type.value if ann and ann.illusion_type else None,
-        "regions": [{"pair": r.pair, "kind": r.kind.value, "mask": r.mask_rle, "clicks": r.clicks}
+        "regions": [{"pair": r.pair, "kind": r.kind.value, "mask": r.mask_rle, "clicks": r.clicks,
+                     "illusion_type": r.illusion_type.value if r.illusion_type else None}
                     for r in (ann.regions if ann else [])],
         "lease": {"mine": bool(ann and ann.lease_user_id == user.id and not held),
                   "held_by_other": held,
@@ -56,6 +57,8 @@ def save_annotation(session: Session, frame_id: int, user: User | Any, *, versio
     """Save the regions as a draft, or submit them (the frame becomes ``annotated``).
 
     ``version`` is the annotation version the page loaded; anything else is a 409 and nothing is written.
+    A region may carry its pair's ``illusion_type`` (a frame can hold a picture and a mirror); a pair
+    without one gets ``illusion_type``, the annotation's.
     """
     frame = session.get(Frame, frame_id, with_for_update=True)
     if frame is None:
@@ -72,7 +75,9 @@ def save_annotation(session: Session, frame_id: int, user: User | Any, *, versio
         raise Conflict(f"frame {frame_id} is being annotated by someone else")
     kind = _parse_type(illusion_type) if illusion_type else None
     parsed = _parse_regions(regions, frame.height, frame.width, require_illusion=submit)
-    if submit and kind is None:
+    for region in parsed:
+        region.illusion_type = region.illusion_type or kind
+    if submit and (kind is None or any(r.illusion_type is None for r in parsed)):
         raise InvalidInput("choose the illusion type (" + ", ".join(IllusionType) + ") before submitting")
     # Compare-and-swap on the version: of two saves from the same version, exactly one wins.
     won = session.execute(update(Annotation).where(Annotation.id == ann.id, Annotation.version == version)
@@ -125,6 +130,15 @@ def _parse_regions(regions: Sequence[Any], height: int, width: int, *, require_i
         if not isinstance(clicks, list) or len(clicks) > 1000:
             raise InvalidInput(f"region {n}: clicks must be a list")
         out.append(Region(pair=pair, kind=kind, mask_rle=mask_to_rle(mask), clicks=clicks))
+    types: dict[int, IllusionType] = {}
+    for n, (r, region) in enumerate(zip(regions, out, strict=True)):
+        if r.get("illusion_type"):
+            chosen = _parse_type(str(r["illusion_type"]))
+            if types.setdefault(region.pair, chosen) != chosen:
+                raise InvalidInput(f"region {n}: pair {region.pair} has two illusion types "
+                                   f"({types[region.pair].value}, {chosen.value})")
+    for region in out:  # both masks of a pair carry its type
+        region.illusion_type = types.get(region.pair)
     if require_illusion:
         pairs = {p for p, _ in seen}
         missing = sorted(p for p in pairs if (p, RegionKind.illusion) not in seen)

@@ -116,6 +116,9 @@ def generate_job(ctx: JobContext) -> dict[str, Any]:
             ctx.log(f"annotation moved on to version {version} since this job was queued; generating that")
         regions = [(r.pair, r.kind, r.mask_rle) for r in ann.regions]
         illusion_type = ann.illusion_type.value if ann.illusion_type else None
+        # A pair's own type (a frame can hold a picture and a mirror), else the annotation's.
+        pair_types = {mask_name("illusion", r.pair): (r.illusion_type.value if r.illusion_type else illusion_type)
+                      for r in ann.regions if r.kind == RegionKind.illusion}
     left = load_output(media, frame.media_key, "left")
     ctx.progress(0.1, "monocular disparity")
     mono = mono_disparity(settings, media, frame, video, left)
@@ -151,7 +154,8 @@ def generate_job(ctx: JobContext) -> dict[str, Any]:
               "plane_threshold": settings.plane_threshold, "plane_hypotheses": settings.plane_hypotheses,
               "inpaint": settings.inpaint_backend, "seed": frame.id})
     provenance = {**mono.provenance, "source": "reconstruction" if mono.provenance["depth_backend"] == "reconstruction"
-                  else "synthesized", "illusion_type": illusion_type, "frame_id": frame.id, "video": video.name,
+                  else "synthesized", "illusion_type": illusion_type,
+                  "pair_types": {name: t for name, t in pair_types.items() if t}, "frame_id": frame.id, "video": video.name,
                   "annotation_version": version, "code_version": code_version(), "generated_at": utcnow().isoformat() + "Z"}
     qa["cpu_s"] = round(time.process_time() - started, 3)
     with transaction(ctx.sessions) as s:

@@ -20,6 +20,9 @@ const STEPS = { ArrowLeft: "left", h: "left", ArrowRight: "right", l: "right", A
                 ArrowDown: "down", j: "down" };
 
 const view = { items: [], total: 0, offset: 0, focus: 0, after: null, before: null, prev: null, next: null };
+// ?evaluation=ID&sort=error[&method=M&region=R]: the evaluation's samples, worst first (kept in the address).
+const BY_ERROR = ["evaluation", "sort", "method", "region", "min_error"];
+const byError = new URLSearchParams([...new URLSearchParams(location.search)].filter(([k]) => BY_ERROR.includes(k)));
 const mine = new Map();  // sample id → the state this session's decisions left it in
 
 const enqueue = serial((err) => say(err.message, "error"));
@@ -32,6 +35,7 @@ function query() {
   setCursor(params, view);
   if (f.state.value !== "all") params.set("state", f.state.value);
   if (f.flagged.value) params.set("flagged", f.flagged.value);
+  if (byError.has("evaluation")) byError.forEach((value, key) => params.set(key, value));
   return params;
 }
 
@@ -57,7 +61,7 @@ async function load(focusId) {
 // Filters, page and focus live in the address, so Back from a sample page lands where one left.
 function address() {
   const f = filters.elements;
-  const params = new URLSearchParams();
+  const params = new URLSearchParams(byError);
   if (f.state.value !== "generated") params.set("state", f.state.value);
   if (f.flagged.value) params.set("flagged", f.flagged.value);
   if (f.thumb.value !== THUMBS[0]) params.set("thumb", f.thumb.value);
@@ -186,8 +190,18 @@ function renderTile(node, sample) {
     el("dl", { className: "metrics" }, ...keyFigures(sample).map(([label, value, title, flagged]) =>
       el("div", { title, className: flagged ? "flagged" : "" }, el("dt", {}, label), el("dd", {}, value)))),
     sample.qa.flags?.length ? el("p", { className: "flags" }, sample.qa.flags.join(" · ")) : "",
+    sample.evaluation ? errorLine(sample) : "",
   );
   return node;
+}
+
+function errorLine(sample) {
+  const e = sample.evaluation;
+  const unit = e.metric === "epe" ? " px" : " %";
+  const value = typeof e.value === "number" ? `${e.value.toFixed(2)}${unit}` : "—";
+  return el("p", { className: "evaluation-error" },
+            el("a", { href: `${root.dataset.evaluations}/${e.id}/samples/${sample.id}?method=${e.method}`, tabIndex: -1 },
+               `${e.method} ${e.metric} on ${e.region}: ${value}`));
 }
 
 function say(text, kind = "info") {
@@ -252,6 +266,10 @@ filters.addEventListener("change", (event) => {
 
 function restore() {
   const params = new URLSearchParams(location.search);
+  if (byError.has("evaluation")) {
+    filters.elements.state.value = "all";  // an evaluation's samples are whatever their state now
+    say(`Samples of evaluation #${byError.get("evaluation")}, worst first by ${byError.get("sort") ?? "error"}.`);
+  }
   for (const name of ["state", "flagged", "thumb"]) {
     if (params.has(name)) filters.elements[name].value = params.get(name);
   }

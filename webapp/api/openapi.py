@@ -53,6 +53,12 @@ _CURSORS = [_q("after", "string", "the next cursor of a page: the page after it"
 _PAGED = {"total": {"type": "integer"}, "prev": {"type": ["string", "null"], "description": "null on the first page"},
           "next": {"type": ["string", "null"], "description": "null on the last page"}}
 _FRAME_ID = {"name": "frame_id", "in": "path", "required": True, "schema": {"type": "integer"}}
+_EVALUATION_ID = {"name": "evaluation_id", "in": "path", "required": True, "schema": {"type": "integer"}}
+# The Samples list by an evaluation's error (offset paging; state/flagged/cursors do not apply then).
+_BY_ERROR = [_q("evaluation", desc="an evaluation id: its database samples, worst first"),
+             _q("sort", "string", "error (EPE, default) or bad2"), _q("method", "string", "default: its first method"),
+             _q("region", "string", "all (default) or illusion"),
+             _q("min_error", "number", "only samples at or above it (EPE px, bad-2 %)")]
 _RUN_ID = {"name": "run_id", "in": "path", "required": True, "schema": {"type": "integer"}}
 _CHECKPOINT = {"name": "name", "in": "path", "required": True, "schema": {"type": "string"},
                "description": "a file name from the run's checkpoints (best.pt, step_0001000.pt, …)"}
@@ -113,7 +119,8 @@ def openapi_document() -> dict[str, Any]:
                                          body="BulkReview", schema="BulkResults")},
             "/samples": {"get": _op("Generated samples with QA figures", "annotator", schema="SampleList",
                                     params=[_q("state", "string", "generated, accepted, rejected"),
-                                            _q("flagged", "string", "true or false"), _q("limit"), _q("offset"), *_CURSORS])},
+                                            _q("flagged", "string", "true or false"), _q("limit"), _q("offset"), *_CURSORS,
+                                            *_BY_ERROR])},
             "/samples/{sample_id}": {"get": _op("One sample: files, parameters, provenance, QA", "annotator",
                                                 params=[_SAMPLE_ID], schema="Sample")},
             "/samples/{sample_id}/review": {"post": _op(
@@ -146,6 +153,17 @@ def openapi_document() -> dict[str, Any]:
                                                   "checkpoint", "admin", params=[_RUN_ID], ok="202", schema="Run")},
             "/runs/{run_id}/promote": {"post": _op("Make a checkpoint of the run the current model", "admin",
                                                    params=[_RUN_ID], body="Promote", schema="CurrentModel")},
+            "/evaluations": {
+                "get": _op("Evaluations, newest first, with their job's state and progress", "curator",
+                           schema="EvaluationList"),
+                "post": _op("Queue an evaluate job on a dataset folder or a run's test split", "curator",
+                            body="EvaluationLaunch", ok="202", schema="Evaluation"),
+            },
+            "/evaluations/{evaluation_id}": {"get": _op("One evaluation and its headline table", "curator",
+                                                        params=[_EVALUATION_ID], schema="Evaluation")},
+            "/evaluations/{evaluation_id}/files/{name}": {"get": _op(
+                "A file of the report folder (report.json, per_sample.csv, pictures/…, predictions/…)", "curator",
+                params=[_EVALUATION_ID, {"name": "name", "in": "path", "required": True, "schema": {"type": "string"}}])},
             "/runs/{run_id}/checkpoints/{name}": {"get": _op("Download a checkpoint file", "curator",
                                                              params=[_RUN_ID, _CHECKPOINT])},
         },
@@ -221,7 +239,8 @@ def openapi_document() -> dict[str, Any]:
                         "properties": {"size": {"type": "array", "items": {"type": "integer"}}, "counts": {"type": "string"}}},
                 "Region": {"type": "object", "required": ["pair", "kind", "mask"], "properties": {
                     "pair": {"type": "integer"}, "kind": {"enum": ["illusion", "support"]}, "mask": _ref("RLE"),
-                    "clicks": {"type": "array"}}},
+                    "clicks": {"type": "array"},
+                    "illusion_type": {"enum": _ILLUSION_TYPES, "description": "the pair's type; default: the annotation's"}}},
                 "SegmentRequest": {"type": "object", "required": ["points", "labels"], "properties": {
                     "points": {"type": "array", "items": {"type": "array", "items": {"type": "number"}},
                                "description": "[[x, y], …] in full-resolution pixels"},
@@ -265,6 +284,24 @@ def openapi_document() -> dict[str, Any]:
                     "run": {"type": "integer"},
                     "step": {"type": "array", "items": {"type": "object", "description": "step, loss, lr, samples_per_s"}},
                     "val": {"type": "array", "items": {"type": "object", "description": "step, metrics, images"}}}},
+                "Evaluation": {"type": "object", "properties": {
+                    "id": {"type": "integer"}, "job": {"type": ["integer", "null"]}, "state": {"type": "string"},
+                    "progress": {"type": ["number", "null"]}, "error": {"type": ["string", "null"]},
+                    "dataset": {"type": "string"}, "format": {"type": "string"},
+                    "methods": {"type": "array", "items": {"type": "string"}}, "resolution": {"type": "string"},
+                    "checkpoint": {"type": ["string", "null"]}, "report_dir": {"type": ["string", "null"]},
+                    "summary": {"type": "object", "description": "samples, failed, headline: method → region → {epe, bad2}"},
+                    "has_results": {"type": "boolean", "description": "per-sample rows for the Samples pages"}}},
+                "EvaluationList": _list("Evaluation"),
+                "EvaluationLaunch": {"type": "object", "properties": {
+                    "data": {"type": "string", "description": "a dataset folder; without it, the run's test split"},
+                    "format": {"enum": ["native", "authors", "booster", "middlebury", "kitti", "sceneflow"]},
+                    "run": {"type": "integer"}, "methods": {"type": "array", "items": {"enum": [
+                        "fusion", "stereo", "mono_align", "mono_gt_align", "sgbm", "predictions"]}},
+                    "checkpoint": {"type": "string", "description": "default: the current model"},
+                    "predictions": {"type": "string"}, "mono": {"type": "string"},
+                    "resolution": {"enum": ["full", "half", "quarter"]}, "align": {"enum": ["lsq", "median"]},
+                    "max_disparity": {"type": "integer"}, "iters": {"type": "integer"}, "kitti_png": {"type": "boolean"}}},
                 "Promote": {"type": "object", "properties": {"checkpoint": {
                     "type": "string", "description": "best (default), last, or a file name from the run's checkpoints"}}},
                 "CurrentModel": {"type": "object", "properties": {

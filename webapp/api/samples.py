@@ -7,8 +7,9 @@ from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
 from dataset.models import Role, Sample, User
+from dataset.services import evaluations, sample_review
 from dataset.services import jobs as job_service
-from dataset.services import sample_review
+from dataset.services.errors import InvalidInput
 from webapp.api.blueprint import api, cursor_args, get_or_404, int_arg, json_body
 from webapp.auth import requires
 from webapp.runtime import runtime
@@ -17,12 +18,39 @@ from webapp.runtime import runtime
 @api.get("/samples")
 @requires(Role.annotator)
 def list_samples() -> ResponseReturnValue:
+    """``?evaluation=ID&sort=error``: the evaluation's samples, worst first (see :func:`samples_by_error`)."""
+    evaluation = int_arg("evaluation")
+    if evaluation is not None:
+        return _samples_by_error(evaluation)
     flagged = request.args.get("flagged")
     items, total, page = sample_review.samples_page(
         g.db, state=request.args.get("state") or None,
         flagged=None if flagged in (None, "") else flagged == "true",
         limit=int_arg("limit", 60) or 60, offset=int_arg("offset", 0) or 0, **cursor_args())
     return {"items": items, "total": total, "prev": page.prev, "next": page.next}
+
+
+SORTS = {"error": "epe", "epe": "epe", "bad2": "bad2"}
+
+
+def _samples_by_error(evaluation_id: int) -> dict[str, object]:
+    sort = request.args.get("sort") or "error"
+    if sort not in SORTS:
+        raise InvalidInput(f"sort must be one of {', '.join(SORTS)} with evaluation=")
+    raw_min = request.args.get("min_error")
+    try:
+        min_error = float(raw_min) if raw_min else None
+    except ValueError:
+        raise InvalidInput("min_error must be a number (EPE in pixels, bad-2 in percent)") from None
+    limit, offset = int_arg("limit", 60) or 60, int_arg("offset", 0) or 0
+    items, total = evaluations.samples_by_error(
+        g.db, evaluation_id, method=request.args.get("method") or None, region=request.args.get("region") or "all",
+        metric=SORTS[sort], min_error=min_error, limit=limit, offset=offset)
+    # An evaluation's order pages by offset (see samples_by_error); its cursors are offsets too, so
+    # the grid's prev/next work alike (the grid sends ``offset`` with every page).
+    more = offset + len(items) < total
+    return {"items": items, "total": total, "offset": offset, "more": more,
+            "prev": str(max(0, offset - limit)) if offset else None, "next": str(offset + len(items)) if more else None}
 
 
 @api.get("/samples/<int:sample_id>")

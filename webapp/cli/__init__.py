@@ -8,6 +8,7 @@ import click
 
 from webapp.cli.bench import bench
 from webapp.cli.capture import import_capture, import_reconstruction
+from webapp.cli.evaluate import evaluate_cmd
 from webapp.cli.export import export_cmd, import_cmd
 from webapp.cli.geometry import geometry
 from webapp.cli.ingest import frames, ingest, prefilter
@@ -34,5 +35,6 @@ def main(ctx: click.Context, data_dir: Path | None) -> None:
 
 
 for command in (init, serve, worker, demo, synth, ingest, prefilter, frames, users, jobs, geometry, bench, selftest,
-                import_capture, import_reconstruction, export_cmd, import_cmd, train, runs, predict):
+                import_capture, import_reconstruction, export_cmd, import_cmd, train, runs, predict,
+                evaluate_cmd):
     main.add_command(command)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import click
 
@@ -101,6 +102,21 @@ def model_benchmark(as_json: bool, repeats: int, train_steps: int) -> None:
     from webapp.benchmarks.model import run_model_bench
 
     _report(run_model_bench(repeats=repeats, train_steps=train_steps), as_json)
+
+
+@bench.command("fusion")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@click.option("--seeds", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Training runs with seeds 0..N-1; figures are their mean and spread.")
+@click.option("--steps", type=click.IntRange(min=1), default=None, help="Training steps per run (default: the benchmark's).")
+@click.option("--work-dir", type=click.Path(file_okay=False, path_type=Path), default=Path("var/bench-fusion"),
+              show_default=True, help="Where the prepared data is cached between runs.")
+def fusion_benchmark(as_json: bool, seeds: int, steps: int | None, work_dir: Path) -> None:
+    """The synthetic illusion benchmark: train lite on the product's own samples and rendered captures,
+    score fusion, stereo, mono-gt-align and sgbm on held-out rendered pairs (all, picture, mirror, non-illusion)."""
+    from webapp.benchmarks.fusion import DEFAULT_STEPS, run_fusion_bench
+
+    _report(run_fusion_bench(work_dir.absolute(), seeds=seeds, steps=steps or DEFAULT_STEPS), as_json)
 
 
 def _report(results: dict[str, object], as_json: bool) -> None:

@@ -9,6 +9,7 @@ import click
 
 from dataset.models import Job
 from dataset.readers import READER_FORMATS
+from dataset.services import training
 from model.align import ALIGN_RULES
 from model.evaluate import RESOLUTIONS
 from model.evaluation import DEFAULT_METHODS, evaluation_params
@@ -60,7 +61,7 @@ def evaluate_cmd(state: CliState, data: Path | None, fmt: str | None, methods: t
                         for m in (methods or DEFAULT_METHODS))
     if checkpoint is None and needs_network:
         checkpoint = current_checkpoint(settings)
-    run_dir = settings.home / "runs" / str(run_id) if run_id is not None else None
+    run_dir = training.run_dir(settings.runs_dir, run_id) if run_id is not None else None
     with service_errors():
         try:
             params = evaluation_params(

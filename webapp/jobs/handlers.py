@@ -9,7 +9,7 @@ from dataset.services.ingest import ingest_video
 from dataset.services.jobs import Handler
 from dataset.services.prefilter import prefilter_frames
 from dataset.services.segmentation import encode_job, propagate_job
-from model.jobs import train_job
+from model.jobs import evaluate_job, train_job
 
 HANDLERS: dict[str, Handler] = {
     "ingest": ingest_video,
@@ -22,4 +22,5 @@ HANDLERS: dict[str, Handler] = {
     "export": export_job,
     "import": import_job,
     "train": train_job,
+    "evaluate": evaluate_job,
 }

@@ -19,7 +19,7 @@ from dataset.models import Frame, Role, SampleState
 from dataset.preview import images, qa
 from dataset.preview.cache import RenderCache
 from dataset.preview.sample_preview import STAGES, SamplePreview
-from dataset.services import sample_review
+from dataset.services import evaluations, sample_review
 from webapp.auth import requires
 from webapp.runtime import runtime
 
@@ -70,7 +70,8 @@ def _sample_page(sample_id: int, open_3d: bool) -> ResponseReturnValue:
         "sample.html", sample=sample, views=previews.views(sample), stages=stages,
         value_range=previews.disparity_range(sample) if stages else None, stops=images.colorbar_stops(),
         summary=qa.summary_rows(sample["qa"]), pairs=qa.pair_rows(sample["qa"]), reasons=sample_review.REJECT_REASONS,
-        can_review=current_user.allows(Role.curator), open_3d=open_3d and bool(stages))
+        can_review=current_user.allows(Role.curator), open_3d=open_3d and bool(stages),
+        evaluated=evaluations.sample_evaluations(g.db, sample_id) if current_user.allows(Role.curator) else [])
 
 
 @samples.get("/samples/<int:sample_id>/views/<view>.png")

@@ -601,8 +601,20 @@ function pairRow(pair, i) {
   el("span", { className: "swatch", ariaHidden: "true" }),
   el("span", { className: "name" }, `Plane ${pair.id}`, i < 9 ? el("kbd", {}, String(i + 1)) : ""),
   el("span", { className: "chips" }, chip("illusion"), chip("support")),
+  pairType(pair),
   el("button", { type: "button", className: "remove", title: "Remove this plane (Backspace)",
                  ariaLabel: `Remove plane ${pair.id}` }, "×"));
+}
+
+// The pair's own illusion type; the first option follows the frame's type.
+function pairType(pair) {
+  const options = [...$("illusion-type").options].filter((o) => o.value)
+    .map((o) => el("option", { value: o.value, selected: o.value === pair.type }, o.textContent));
+  return el("select", {
+    className: "pair-type", ariaLabel: `Illusion type of plane ${pair.id}`, disabled: !session,
+    onclick: (event) => event.stopPropagation(),  // choosing a type is not selecting the pair
+    onchange: (event) => { if (editable()) commit(S.setPairType(history.doc, pair.id, event.target.value || null)); },
+  }, el("option", { value: "", selected: !pair.type }, "frame's type"), ...options);
 }
 
 // ---- wiring ----------------------------------------------------------------------------------------
@@ -679,7 +691,8 @@ document.addEventListener("visibilitychange", () => { if (document.hidden) sessi
 window.annotator = {
   get frame() { return root.dataset.state === "ready" ? frame : null; },
   get pairs() {
-    return (history?.doc.pairs ?? []).map((p) => ({ id: p.id, illusion: p.illusion?.area ?? 0, support: p.support?.area ?? 0 }));
+    return (history?.doc.pairs ?? []).map((p) => ({ id: p.id, illusion: p.illusion?.area ?? 0, support: p.support?.area ?? 0,
+                                                   type: p.type ?? null }));
   },
   get dirty() { return Boolean(session && history.doc !== session.saved); },
   imageToClient: (x, y) => view.imageToClient(x, y),

@@ -1,6 +1,7 @@
 // The annotation of one frame as an immutable document, its undo history and its copy in this browser.
 //
-// doc    = { type: "picture" | … | null, pairs: [{ id, illusion: Region | null, support: Region | null }] }
+// doc    = { type: "picture" | … | null, pairs: [{ id, type, illusion: Region | null, support: Region | null }] }
+//          (a pair's type: null = the frame's; a frame can hold a picture and a mirror)
 // Region = { runs: COCO runs (column-major) | null, area, points: [{x, y, label}], box: [x0, y0, x1, y1] | null,
 //            extra: other click entries kept as they came (e.g. {propagated_from}), stale: mask lags the clicks }
 // Every change makes a new doc that shares what did not change, so history is a list of docs and costs
@@ -24,6 +25,10 @@ export const pairOf = (doc, id) => doc.pairs.find((p) => p.id === id);
 
 export function setRegion(doc, pairId, kind, next) {
   return { ...doc, pairs: doc.pairs.map((p) => (p.id === pairId ? { ...p, [kind]: next } : p)) };
+}
+
+export function setPairType(doc, pairId, type) {
+  return { ...doc, pairs: doc.pairs.map((p) => (p.id === pairId ? { ...p, type } : p)) };
 }
 
 export function addPair(doc) {
@@ -97,7 +102,8 @@ export function fromServer(detail) {
   const doc = { type: detail.illusion_type ?? null, pairs: [] };
   for (const r of detail.regions) {
     let pair = pairOf(doc, r.pair);
-    if (!pair) doc.pairs.push(pair = { id: r.pair, illusion: null, support: null });
+    if (!pair) doc.pairs.push(pair = { id: r.pair, illusion: null, support: null, type: null });
+    if (r.illusion_type && r.illusion_type !== doc.type) pair.type = r.illusion_type;
     const clicks = r.clicks ?? [];
     pair[r.kind] = region({
       runs: runsOf(r.mask),
@@ -115,7 +121,8 @@ export function toServer(doc, height, width) {
   return doc.pairs.flatMap((p) => KINDS.filter((k) => p[k]?.area).map((kind) => {
     const r = p[kind];
     return { pair: p.id, kind, mask: { size: [height, width], counts: compressed(r.runs) },
-             clicks: [...r.extra, ...r.points, ...(r.box ? [{ box: r.box }] : [])] };
+             clicks: [...r.extra, ...r.points, ...(r.box ? [{ box: r.box }] : [])],
+             ...(p.type ? { illusion_type: p.type } : {}) };
   }));
 }
 

@@ -1,0 +1,173 @@
+"""Evaluations in the database: one row per evaluate job, and per database sample and method its
+figures, so the Samples pages can sort and filter by an evaluation's error.
+
+The job computes the report (``model.evaluation``); this module only stores and reads it.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy import delete, func, select
+from sqlalchemy.orm import Session
+
+from dataset.models import Evaluation, EvaluationResult, Frame, Sample, User, Video
+from dataset.services.errors import InvalidInput, NotFound
+from dataset.services.sample_review import sample_json
+
+SORT_REGIONS = ("all", "illusion")  # the regions with indexed columns
+SORT_METRICS = ("epe", "bad2")
+
+
+def evaluation_for_job(session: Session, job_id: int, params: dict[str, Any], user: User | None = None) -> Evaluation:
+    """The job's evaluation row, created on first call (a retried job keeps its row)."""
+    row = session.scalar(select(Evaluation).where(Evaluation.job_id == job_id))
+    if row is None:
+        row = Evaluation(job_id=job_id, params=params, dataset=params.get("data") or _split_name(params),
+                         created_by_id=user.id if user else None)
+        session.add(row)
+        session.flush()
+    return row
+
+
+def _split_name(params: dict[str, Any]) -> str:
+    return f"test split of {params.get('run_dir')}"
+
+
+def _finite(value: Any) -> float | None:
+    return float(value) if isinstance(value, int | float) and math.isfinite(value) else None
+
+
+def record_results(session: Session, evaluation: Evaluation, report: dict[str, Any], summary: dict[str, Any],
+                   report_dir: Path, sample_ids: dict[str, int], predictions: dict[str, str]) -> int:
+    """Store the summary and, for each (method, database sample), its figures; replaces an earlier
+    attempt's rows. ``sample_ids``: sample name → database id (folder samples have none and are
+    skipped); ``predictions``: sample name → the prediction's path under ``predictions/<method>/``.
+    Returns how many result rows were written."""
+    evaluation.summary, evaluation.report_dir = summary, str(report_dir)
+    session.execute(delete(EvaluationResult).where(EvaluationResult.evaluation_id == evaluation.id))
+    rows = []
+    for method, data in report["methods"].items():
+        for row in data["per_sample"]:
+            sample_id = sample_ids.get(row["sample"])
+            if sample_id is None:
+                continue
+            regions = row["regions"]
+            rows.append(EvaluationResult(
+                evaluation_id=evaluation.id, sample_id=sample_id, method=method, regions=_clean(regions),
+                prediction=predictions.get(row["sample"]),
+                epe_all=_finite(regions.get("all", {}).get("epe")), bad2_all=_finite(regions.get("all", {}).get("bad2")),
+                epe_illusion=_finite(regions.get("illusion", {}).get("epe")),
+                bad2_illusion=_finite(regions.get("illusion", {}).get("bad2"))))
+    session.add_all(rows)
+    session.flush()
+    return len(rows)
+
+
+def _clean(regions: dict[str, dict[str, Any]]) -> dict[str, dict[str, float | None]]:
+    """JSON columns hold no NaN: an empty region's figures become null."""
+    return {r: {k: _finite(v) for k, v in figures.items()} for r, figures in regions.items()}
+
+
+def evaluation_json(evaluation: Evaluation) -> dict[str, Any]:
+    job = evaluation.job
+    return {"id": evaluation.id, "job": evaluation.job_id, "state": job.state.value if job else "unknown",
+            "progress": job.progress if job else None, "error": job.error if job else None,
+            "created_by": evaluation.created_by.name if evaluation.created_by else None,
+            "created_at": evaluation.created_at.isoformat() + "Z", "dataset": evaluation.dataset,
+            "format": evaluation.params.get("format"), "methods": evaluation.params.get("methods", []),
+            "resolution": evaluation.params.get("resolution"), "checkpoint": evaluation.params.get("checkpoint"),
+            "summary": evaluation.summary, "report_dir": evaluation.report_dir,
+            "has_results": evaluation.summary.get("database_rows", 0) > 0}
+
+
+def list_evaluations(session: Session, limit: int = 100) -> list[dict[str, Any]]:
+    """The newest evaluations first, with their job's state and progress."""
+    rows = session.scalars(select(Evaluation).order_by(Evaluation.id.desc()).limit(limit))
+    return [evaluation_json(e) for e in rows]
+
+
+def get_evaluation(session: Session, evaluation_id: int) -> Evaluation:
+    row = session.get(Evaluation, evaluation_id)
+    if row is None:
+        raise NotFound(f"no evaluation {evaluation_id}")
+    return row
+
+
+def report_file(evaluation: Evaluation, name: str) -> Path:
+    """A file of the evaluation's report folder by its relative path; never a path outside it."""
+    if not evaluation.report_dir:
+        raise NotFound(f"evaluation {evaluation.id} has no report yet")
+    root = Path(evaluation.report_dir).resolve()
+    path = (root / name).resolve()
+    if not path.is_relative_to(root) or not path.is_file():
+        raise NotFound(f"evaluation {evaluation.id} has no report file {name!r}")
+    return path
+
+
+def _sort_column(region: str, metric: str) -> Any:
+    if region not in SORT_REGIONS or metric not in SORT_METRICS:
+        raise InvalidInput(f"sort by {'/'.join(SORT_METRICS)} on {' or '.join(SORT_REGIONS)} only, "
+                           f"got {metric} on {region}")
+    return getattr(EvaluationResult, f"{metric}_{region}")
+
+
+def default_method(evaluation: Evaluation) -> str:
+    methods = evaluation.params.get("methods") or []
+    if not methods:
+        raise InvalidInput(f"evaluation {evaluation.id} has no methods")
+    return str(methods[0])
+
+
+def samples_by_error(session: Session, evaluation_id: int, *, method: str | None = None, region: str = "all",
+                     metric: str = "epe", min_error: float | None = None, limit: int = 60,
+                     offset: int = 0) -> tuple[list[dict[str, Any]], int]:
+    """The evaluation's samples, worst first by ``metric`` (EPE px, bad-2 %) on ``region`` for
+    ``method`` (default: the evaluation's first), optionally only those at or above ``min_error``;
+    each sample's JSON carries ``evaluation`` (the method's figures). Returns (page, total).
+
+    Offset paging is enough here: an evaluation holds one row per test sample (thousands, not the
+    millions of frames the keyset pages serve), and the order is an index of its own.
+    """
+    if not 1 <= limit <= 500 or offset < 0:
+        raise InvalidInput("limit must be 1..500 and offset ≥ 0")
+    evaluation = get_evaluation(session, evaluation_id)
+    method = method or default_method(evaluation)
+    column = _sort_column(region, metric)
+    where = [EvaluationResult.evaluation_id == evaluation_id, EvaluationResult.method == method]
+    if min_error is not None:
+        where.append(column >= min_error)
+    query = (select(EvaluationResult, Sample, Frame, Video).join(Sample, Sample.id == EvaluationResult.sample_id)
+             .join(Frame, Frame.id == Sample.frame_id).join(Video, Video.id == Frame.video_id).where(*where)
+             .order_by(column.desc().nulls_last(), EvaluationResult.sample_id).limit(limit).offset(offset))
+    total = int(session.scalar(select(func.count()).select_from(EvaluationResult).where(*where)) or 0)
+    items = []
+    for result, sample, frame, video in session.execute(query):
+        item = sample_json(sample, frame, video)
+        item["evaluation"] = {"id": evaluation_id, "method": method, "region": region, "metric": metric,
+                              "value": getattr(result, f"{metric}_{region}"), "regions": result.regions}
+        items.append(item)
+    return items, total
+
+
+def sample_result(session: Session, evaluation_id: int, sample_id: int, method: str) -> EvaluationResult:
+    row = session.scalar(select(EvaluationResult).where(
+        EvaluationResult.evaluation_id == evaluation_id, EvaluationResult.sample_id == sample_id,
+        EvaluationResult.method == method))
+    if row is None:
+        raise NotFound(f"evaluation {evaluation_id} has no {method} result for sample {sample_id}")
+    return row
+
+
+def sample_evaluations(session: Session, sample_id: int) -> list[dict[str, Any]]:
+    """Every evaluation with results for this sample: id, method, figures (newest first)."""
+    rows = session.execute(select(EvaluationResult, Evaluation.created_at)
+                           .join(Evaluation, Evaluation.id == EvaluationResult.evaluation_id)
+                           .where(EvaluationResult.sample_id == sample_id)
+                           .order_by(EvaluationResult.evaluation_id.desc(), EvaluationResult.method))
+    return [{"evaluation": r.evaluation_id, "method": r.method, "epe_all": r.epe_all, "bad2_all": r.bad2_all,
+             "epe_illusion": r.epe_illusion, "created_at": created.isoformat() + "Z",
+             "has_prediction": bool(r.prediction)} for r, created in rows]
+

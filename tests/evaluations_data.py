@@ -1,0 +1,50 @@
+"""A database evaluation for tests: accepted samples, a run folder whose test split holds them all,
+and a ``predictions`` folder whose error grows with the sample (0, 0.5, 1, … px), evaluated by the
+real job in this process."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from dataset.atomic import atomic_write_bytes
+from dataset.db import transaction
+from dataset.formats import write_pfm
+from dataset.models import Sample
+from dataset.readers.version import pin_dataset_version
+from dataset.services import jobs as job_service
+from dataset.services import training
+from model.evaluation import evaluation_params
+from tests.runs_data import DISPARITY, H, W, add_accepted_samples
+from webapp.jobs.handlers import HANDLERS
+from webapp.runtime import Runtime
+
+STEP_PX = 0.5
+
+
+def evaluated_database(rt: Runtime, tmp: Path, videos: int = 3) -> tuple[int, list[int]]:
+    """Runs an evaluate job (methods predictions and sgbm) on every accepted sample; returns the job id and
+    the sample ids, best first (sample k is predicted ``k × STEP_PX`` px off)."""
+    with transaction(rt.sessions) as s:
+        ids = add_accepted_samples(s, rt.media, videos=videos)
+        version = pin_dataset_version(s, rt.media)
+        lefts = {sid: s.get(Sample, sid).files["left"] for sid in ids}
+        for sid in ids:  # the sample page reads the generator's QA figures
+            s.get(Sample, sid).qa = {"flags": [], "hole_fraction": 0.0}
+    run_dir = training.run_dir(rt.settings.runs_dir, 1)
+    atomic_write_bytes(run_dir / "run.json", json.dumps(
+        {"config": {}, "dataset": version, "splits": {"train": [], "val": [], "test": ids},
+         "media_root": str(rt.settings.media_root), "init_checkpoint": None, "data": {"format": "database"}}).encode())
+    predictions = tmp / "predictions"
+    for k, sid in enumerate(ids):
+        path = predictions / Path(lefts[sid]).with_suffix(".pfm")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_pfm(path, np.full((H, W), DISPARITY + k * STEP_PX, np.float32))
+    params = evaluation_params(data=None, format=None, methods=["predictions", "sgbm"], predictions=predictions,
+                               run_dir=run_dir, out=tmp / "report")
+    with transaction(rt.sessions) as s:
+        job_id = job_service.create_job(s, "evaluate", params, None).id
+    assert job_service.execute_job(job_id, {"evaluate": HANDLERS["evaluate"]}, rt).value == "succeeded"
+    return job_id, ids

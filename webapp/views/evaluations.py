@@ -1,0 +1,110 @@
+"""The Evaluation pages (curators and admins): the launch form and the list, one report (the
+paper-style table, sortable per-sample metrics, the worst and best samples), and one evaluated
+database sample — the method's prediction, error map and confidence beside its ground truth.
+
+Launching goes through the API (``POST /api/v1/evaluations``); report files are served by the
+API's file route, confined to the report folder.
+"""
+
+from __future__ import annotations
+
+import json
+from io import BytesIO
+from pathlib import Path
+
+import numpy as np
+from flask import Blueprint, abort, g, render_template, request, send_file
+from flask.typing import ResponseReturnValue
+
+from dataset.formats import read_pfm
+from dataset.models import Role, Sample
+from dataset.preview.evaluation_maps import EVALUATION_IMAGES, evaluation_image
+from dataset.preview.images import encode_png
+from dataset.readers import READER_FORMATS
+from dataset.readers.base import resize_disparity
+from dataset.samples import load_output
+from dataset.services import evaluations, sample_review, training
+from dataset.services.errors import NotFound
+from model.align import ALIGN_RULES
+from model.evaluate import RESOLUTIONS
+from model.evaluation import DEFAULT_METHODS
+from model.methods import METHODS
+from model.registry import current_model
+from model.report import DEPTH_METRICS, TABLE_METRICS
+from webapp.auth import requires
+from webapp.runtime import runtime
+
+bp = Blueprint("evaluations", __name__)
+
+
+@bp.get("/evaluations")
+@requires(Role.curator)
+def index() -> ResponseReturnValue:
+    """The launch form and every evaluation with its state and progress (live, from the API)."""
+    runs = [r.id for r in training.list_runs(g.db)]
+    return render_template("evaluations.html", formats=READER_FORMATS, methods=METHODS, default_methods=DEFAULT_METHODS,
+                           resolutions=list(RESOLUTIONS), align_rules=ALIGN_RULES, runs=runs,
+                           current=current_model(runtime().settings))
+
+
+@bp.get("/evaluations/<int:evaluation_id>")
+@requires(Role.curator)
+def report(evaluation_id: int) -> ResponseReturnValue:
+    """The report, from its ``report.json``."""
+    evaluation = evaluations.get_evaluation(g.db, evaluation_id)
+    try:
+        data = json.loads(evaluations.report_file(evaluation, "report.json").read_text(encoding="utf-8"))
+    except NotFound:
+        data = None
+    regions: list[str] = []
+    has_depth = False
+    for method in (data or {}).get("methods", {}).values():
+        regions += [r for r in method["regions"] if r not in regions]
+        has_depth = has_depth or any("abs_rel" in f for f in method["regions"].values())
+    return render_template("evaluation.html", evaluation=evaluations.evaluation_json(evaluation), report=data,
+                           regions=regions, metrics=TABLE_METRICS + (DEPTH_METRICS if has_depth else ()),
+                           pictures=evaluation.summary.get("pictures", {}))
+
+
+@bp.get("/evaluations/<int:evaluation_id>/samples/<int:sample_id>")
+@requires(Role.curator)
+def sample(evaluation_id: int, sample_id: int) -> ResponseReturnValue:
+    """One database sample of the evaluation: ground truth, prediction, error and confidence."""
+    evaluation = evaluations.get_evaluation(g.db, evaluation_id)
+    method = request.args.get("method") or evaluations.default_method(evaluation)
+    result = evaluations.sample_result(g.db, evaluation_id, sample_id, method)
+    return render_template("evaluation_sample.html", evaluation=evaluations.evaluation_json(evaluation),
+                           sample=sample_review.get_sample(g.db, sample_id), method=method, result=result,
+                           has_confidence=_confidence_path(evaluation.report_dir, result.prediction) is not None)
+
+
+@bp.get("/evaluations/<int:evaluation_id>/samples/<int:sample_id>/<method>/<image>.png")
+@requires(Role.curator)
+def sample_image(evaluation_id: int, sample_id: int, method: str, image: str) -> ResponseReturnValue:
+    """``image`` in gt, prediction, error, confidence, coloured at the evaluation's resolution."""
+    if image not in EVALUATION_IMAGES:
+        abort(404, f"no {image!r} picture; choose from {', '.join(EVALUATION_IMAGES)}")
+    evaluation = evaluations.get_evaluation(g.db, evaluation_id)
+    result = evaluations.sample_result(g.db, evaluation_id, sample_id, method)
+    if not result.prediction:
+        abort(404, f"evaluation {evaluation_id} kept no {method} prediction of sample {sample_id}")
+    prediction = read_pfm(evaluations.report_file(evaluation, f"predictions/{method}/{result.prediction}"))
+    confidence_path = _confidence_path(evaluation.report_dir, result.prediction)
+    confidence = read_pfm(confidence_path) if confidence_path and image == "confidence" else None
+    row = g.db.get(Sample, sample_id)
+    gt = load_output(runtime().media, row.files["disparity"], "disparity")
+    if "valid" in row.files:
+        gt = np.where(load_output(runtime().media, row.files["valid"], "valid"), gt, np.nan).astype(np.float32)
+    gt = gt if gt.shape == prediction.shape else resize_disparity(gt, prediction.shape)
+    try:
+        rgb = evaluation_image(image, gt, prediction, confidence)
+    except KeyError:
+        abort(404, f"evaluation {evaluation_id} has no {image} of sample {sample_id}")
+    return send_file(BytesIO(encode_png(rgb)), mimetype="image/png", max_age=0)
+
+
+def _confidence_path(report_dir: str | None, prediction: str | None) -> Path | None:
+    if not report_dir or not prediction:
+        return None
+    path = Path(report_dir) / "predictions" / "confidence" / prediction
+    return path if path.is_file() else None
