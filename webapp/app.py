@@ -9,13 +9,24 @@ from typing import Any
 from flask import Flask, g, make_response, render_template
 from flask_wtf.csrf import CSRFError
 from werkzeug.exceptions import HTTPException
+from werkzeug.routing import IntegerConverter, Map
 
 from dataset.atomic import atomic_write_bytes
 from dataset.services.errors import ServiceError
+from dataset.services.validate import DB_INT_MAX
 from webapp.auth import init_auth, is_api_request, json_error
 from webapp.runtime import Runtime
 from webapp.settings import Settings
 from webapp.throttle import init_throttle
+
+
+class DatabaseInt(IntegerConverter):
+    """``<int:…>`` limited to the integers the database's INTEGER columns store."""
+
+    def __init__(self, url_map: Map, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("max", DB_INT_MAX)
+        super().__init__(url_map, *args, **kwargs)
+
 
 STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
 
@@ -32,6 +43,8 @@ def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
         SESSION_COOKIE_SECURE=settings.https,
     )
     app.json.sort_keys = False  # type: ignore[attr-defined]
+    # Before any route is added: ids beyond what the database stores are a 404, not a crash.
+    app.url_map.converters["int"] = DatabaseInt
     app.extensions["runtime"] = rt
 
     @app.before_request

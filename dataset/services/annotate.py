@@ -32,6 +32,7 @@ from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.frames import update_frame
 from dataset.services.jobs import JobContext
+from dataset.services.validate import db_int
 
 ANNOTATABLE = (FrameState.approved,)
 DELETE_REASONS = ("redundant", "imperceptible")
@@ -213,10 +214,11 @@ def _parse_regions(regions: Sequence[Any], height: int, width: int, *, require_i
     for n, r in enumerate(regions):
         if not isinstance(r, dict):
             raise InvalidInput(f"region {n} is not an object")
+        pair = db_int(r.get("pair"), f"region {n}: pair", minimum=0)
         try:
-            pair, kind = int(r["pair"]), RegionKind(r["kind"])
-        except (KeyError, TypeError, ValueError):
-            raise InvalidInput(f"region {n} needs an integer pair and a kind (illusion or support)") from None
+            kind = RegionKind(r.get("kind"))
+        except ValueError:
+            raise InvalidInput(f"region {n} needs a kind (illusion or support)") from None
         if (pair, kind) in seen:
             raise InvalidInput(f"pair {pair} has two {kind.value} regions")
         seen.add((pair, kind))
@@ -296,7 +298,7 @@ def segment(settings: Any, media: MediaStore, frame: Frame, body: dict[str, Any]
         labels = np.asarray(body.get("labels") or [], dtype=np.int64).reshape(-1)
         box = body.get("box")
         box = tuple(float(v) for v in box) if box is not None else None
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise InvalidInput("points must be [[x, y], …], labels [1|0, …], box [x0, y0, x1, y1]") from None
     if box is not None and len(box) != 4:
         raise InvalidInput("box must be [x0, y0, x1, y1]")

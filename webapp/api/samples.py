@@ -9,6 +9,7 @@ from flask_login import current_user
 from dataset.models import Role, Sample, User
 from dataset.services import jobs as job_service
 from dataset.services import sample_review
+from dataset.services.validate import optional_text
 from webapp.api.blueprint import api, get_or_404, int_arg, json_body
 from webapp.auth import requires
 from webapp.runtime import runtime
@@ -21,7 +22,7 @@ def list_samples() -> ResponseReturnValue:
     items, total = sample_review.list_samples(
         g.db, state=request.args.get("state") or None,
         flagged=None if flagged in (None, "") else flagged == "true",
-        limit=int_arg("limit", 60) or 60, offset=int_arg("offset", 0) or 0)
+        limit=int_arg("limit", 60, minimum=1, maximum=500), offset=int_arg("offset", 0, minimum=0))
     return {"items": items, "total": total}
 
 
@@ -35,7 +36,8 @@ def get_sample(sample_id: int) -> ResponseReturnValue:
 @requires(Role.curator)
 def review_sample(sample_id: int) -> ResponseReturnValue:
     body = json_body()
-    sample_review.review_sample(g.db, sample_id, current_user, str(body.get("decision", "")), str(body.get("reason", "")))
+    sample_review.review_sample(g.db, sample_id, current_user, optional_text(body.get("decision"), "decision"),
+                                optional_text(body.get("reason"), "reason"))
     g.db.commit()
     return sample_review.get_sample(g.db, sample_id)
 
