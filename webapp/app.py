@@ -13,6 +13,7 @@ from werkzeug.routing import IntegerConverter, Map
 
 from dataset.atomic import atomic_write_bytes
 from dataset.services.errors import ServiceError
+from dataset.services.media_gc import clean_incoming
 from dataset.services.validate import DB_INT_MAX
 from webapp.auth import init_auth, is_api_request, json_error
 from webapp.runtime import Runtime
@@ -28,12 +29,15 @@ class DatabaseInt(IntegerConverter):
         super().__init__(url_map, *args, **kwargs)
 
 
+STALE_UPLOAD_S = 600.0
 STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
 
 
 def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
     """Build the app for ``settings``; tests may pass a shared ``runtime``."""
     rt = runtime or Runtime(settings)
+    # Part files of uploads a killed server left behind (a live upload keeps writing its part).
+    clean_incoming(rt.media, older_than_s=STALE_UPLOAD_S)
     app = Flask(__name__, static_folder=str(STATIC_DIR), static_url_path="/static")
     app.config.update(
         SECRET_KEY=settings.secret_key or _stored_secret(settings.home),

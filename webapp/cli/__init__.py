@@ -12,6 +12,7 @@ from webapp.cli.export import export_cmd, import_cmd
 from webapp.cli.geometry import geometry
 from webapp.cli.ingest import frames, ingest, prefilter
 from webapp.cli.jobs import jobs, worker
+from webapp.cli.media import media
 from webapp.cli.selftest import selftest
 from webapp.cli.state import CliState
 from webapp.cli.users import users
@@ -32,5 +33,5 @@ def main(ctx: click.Context, data_dir: Path | None) -> None:
 
 
 for command in (init, serve, worker, demo, synth, ingest, prefilter, frames, users, jobs, geometry, bench, selftest,
-                import_capture, import_reconstruction, export_cmd, import_cmd):
+                import_capture, import_reconstruction, export_cmd, import_cmd, media):
     main.add_command(command)
