@@ -16,6 +16,7 @@ from dataset.services.errors import ServiceError
 from dataset.services.media_gc import clean_incoming
 from dataset.services.validate import DB_INT_MAX
 from webapp.auth import init_auth, is_api_request, json_error
+from webapp.headers import init_headers
 from webapp.runtime import Runtime
 from webapp.settings import Settings
 from webapp.throttle import init_throttle
@@ -62,6 +63,7 @@ def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
             db.close()
 
     init_throttle(app, settings)
+    init_headers(app, settings)
     init_auth(app)
 
     from webapp.api import api
