@@ -33,7 +33,7 @@ def test_out_of_range_query_integers_are_400(client, tokens, query: str) -> None
 @pytest.mark.parametrize(("body", "reason"), [
     (b'{"decision": "approve", "revision": 1e400}', "out of range"),
     (b"[" * 100_000, "nested too deeply"),
-    (b'{"decision": "approve", "revision": NaN}', "not JSON"),
+    (b'{"decision": "approve", "revision": NaN}', "NaN is not JSON"),
     (b'{"decision": "approve", "revision": true}', "revision"),
     (b'{"decision": "approve", "revision": ' + BIG.encode() + b"}", "revision"),
     (b'{"decision": "reject", "reason": ["blurry"]}', "reason must be a string"),

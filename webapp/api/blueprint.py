@@ -33,7 +33,7 @@ def json_body() -> dict[str, Any]:
     except RecursionError:
         raise InvalidInput("the JSON body is nested too deeply") from None
     except ValueError as exc:  # JSONDecodeError, UnicodeDecodeError and ours are ValueErrors
-        raise InvalidInput(f"the body is not valid JSON: {exc}") from None
+        raise InvalidInput(f"expected a JSON object body: {exc}") from None
     if not isinstance(body, dict):
         raise InvalidInput("expected a JSON object body")
     return body
