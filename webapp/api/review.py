@@ -32,7 +32,7 @@ def review_frame(frame_id: int) -> ResponseReturnValue:
     body = json_body()
     revision = body.get("revision")
     if revision is not None:
-        revision = db_int(revision, "revision (the frame's revision you loaded)")
+        revision = db_int(revision, "revision")
     try:
         frame = review_service.review_frame(g.db, frame_id, current_user, optional_text(body.get("decision"), "decision"),
                                             optional_text(body.get("reason"), "reason"), revision)
