@@ -85,6 +85,10 @@ class MediaStore:
         finally:
             Path(tmp).unlink(missing_ok=True)
 
+    @staticmethod
+    def is_key(text: str) -> bool:
+        return bool(_KEY.match(text))
+
     def path(self, key: str) -> Path:
         """The file of ``key``; raises :class:`MediaKeyError` for anything not a store key."""
         if not isinstance(key, str) or not _KEY.match(key):

@@ -36,6 +36,7 @@ class Settings(BaseSettings):
     queue_name: str = Field("illusion-studio", description="Queue (Redis key prefix); workers of one deployment share it.")
     queue_resend_after_s: float = Field(30.0, gt=0,
                                         description="Workers re-send a queued job whose message is missing this long.")
+    media_gc_grace_hours: float = Field(24.0, ge=0, description="`media gc` keeps unreferenced files younger than this.")
     media_root: Path = Field(Path(), description="Content-addressed media store; default <home>/media.")
     host: str = "127.0.0.1"
     port: int = Field(5000, ge=1, le=65535)

@@ -9,20 +9,36 @@ from typing import Any
 from flask import Flask, g, make_response, render_template
 from flask_wtf.csrf import CSRFError
 from werkzeug.exceptions import HTTPException
+from werkzeug.routing import IntegerConverter, Map
 
 from dataset.atomic import atomic_write_bytes
 from dataset.services.errors import ServiceError
+from dataset.services.media_gc import clean_incoming
+from dataset.services.validate import DB_INT_MAX
 from dataset.settings import Settings
 from webapp.auth import init_auth, is_api_request, json_error
+from webapp.headers import init_headers
 from webapp.runtime import Runtime
 from webapp.throttle import init_throttle
 
+
+class DatabaseInt(IntegerConverter):
+    """``<int:…>`` limited to the integers the database's INTEGER columns store."""
+
+    def __init__(self, url_map: Map, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("max", DB_INT_MAX)
+        super().__init__(url_map, *args, **kwargs)
+
+
+STALE_UPLOAD_S = 600.0
 STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
 
 
 def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
     """Build the app for ``settings``; tests may pass a shared ``runtime``."""
     rt = runtime or Runtime(settings)
+    # Part files of uploads a killed server left behind (a live upload keeps writing its part).
+    clean_incoming(rt.media, older_than_s=STALE_UPLOAD_S)
     app = Flask(__name__, static_folder=str(STATIC_DIR), static_url_path="/static")
     app.config.update(
         SECRET_KEY=settings.secret_key or _stored_secret(settings.home),
@@ -32,6 +48,8 @@ def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
         SESSION_COOKIE_SECURE=settings.https,
     )
     app.json.sort_keys = False  # type: ignore[attr-defined]
+    # Before any route is added: ids beyond what the database stores are a 404, not a crash.
+    app.url_map.converters["int"] = DatabaseInt
     app.extensions["runtime"] = rt
 
     @app.before_request
@@ -45,6 +63,7 @@ def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
             db.close()
 
     init_throttle(app, settings)
+    init_headers(app, settings)
     init_auth(app)
 
     from webapp.api import api

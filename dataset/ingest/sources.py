@@ -56,6 +56,20 @@ class FrameSource(Protocol):
     def frames(self, fps: float | None) -> Iterator[DecodedFrame]: ...
 
 
+_IMAGE_MAGIC = ((b"\x89PNG\r\n\x1a\n", "PNG"), (b"\xff\xd8\xff", "JPEG"), (b"GIF8", "GIF"), (b"BM", "BMP"),
+                (b"II*\x00", "TIFF"), (b"MM\x00*", "TIFF"))
+
+
+def image_kind(head: bytes) -> str | None:
+    """The still-image format whose signature starts ``head`` (PNG, JPEG …), or None.
+
+    A still image named like a video would decode as a one-frame "video"; uploads refuse it.
+    """
+    if head[:4] == b"RIFF" and head[8:12] == b"WEBP":
+        return "WebP"
+    return next((kind for magic, kind in _IMAGE_MAGIC if head.startswith(magic)), None)
+
+
 def sampled(index: int, native_fps: float, fps: float | None) -> bool:
     """Whether frame ``index`` of a ``native_fps`` stream is kept when sampling at ``fps``.
 

@@ -19,6 +19,7 @@ from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.frames import get_frame, update_frame
 from dataset.services.leases import ensure_annotation_row, held_by_other, release_lease
+from dataset.services.validate import db_int
 
 ANNOTATABLE = (FrameState.approved,)
 DELETE_REASONS = ("redundant", "imperceptible")
@@ -113,10 +114,11 @@ def _parse_regions(regions: Sequence[Any], height: int, width: int, *, require_i
     for n, r in enumerate(regions):
         if not isinstance(r, dict):
             raise InvalidInput(f"region {n} is not an object")
+        pair = db_int(r.get("pair"), f"region {n}: pair", minimum=0)
         try:
-            pair, kind = int(r["pair"]), RegionKind(r["kind"])
-        except (KeyError, TypeError, ValueError):
-            raise InvalidInput(f"region {n} needs an integer pair and a kind (illusion or support)") from None
+            kind = RegionKind(r.get("kind"))
+        except ValueError:
+            raise InvalidInput(f"region {n} needs a kind (illusion or support)") from None
         if (pair, kind) in seen:
             raise InvalidInput(f"pair {pair} has two {kind.value} regions")
         seen.add((pair, kind))

@@ -48,8 +48,20 @@ def ingest_params(path: str, *, fps: float | None = DEFAULT_FPS, source: str | N
 
 
 def ingest_video(ctx: JobContext) -> dict[str, Any]:
-    """Job handler for kind ``ingest`` (params from :func:`ingest_params`)."""
-    p = ctx.params
+    """Job handler for kind ``ingest`` (params from :func:`ingest_params`).
+
+    Errors about an upload name the file as uploaded, never its path in the media store.
+    """
+    try:
+        return _ingest(ctx, ctx.params)
+    except IngestError as exc:
+        name = ctx.params.get("original_name")
+        if not name:
+            raise
+        raise IngestError(str(exc).replace(str(ctx.params["path"]), name)) from None
+
+
+def _ingest(ctx: JobContext, p: dict[str, Any]) -> dict[str, Any]:
     src = open_source(p["path"])
     info = src.info
     with transaction(ctx.sessions) as s:

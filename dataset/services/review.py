@@ -14,6 +14,7 @@ from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound, ServiceError
 from dataset.services.frames import FRAME_ORDER, frame_json, frame_total, update_frame
 from dataset.services.paging import bounded_count, keyset_page
+from dataset.services.validate import db_int
 
 REJECT_REASONS = ("blurry", "occluded", "no illusion", "watermark", "duplicate")
 
@@ -63,12 +64,15 @@ def review_many(session: Session, items: Sequence[dict[str, Any]], user: User | 
         raise InvalidInput("items must hold 1..1000 frames")
     results = []
     for item in items:
+        if not isinstance(item, dict):
+            results.append({"id": None, "status": 400, "error": "each item must be an object {id, revision}"})
+            continue
         try:
             # review_frame checks everything before its one conditional write, so a refused item
             # leaves nothing behind and the others go on.
             revision = item.get("revision")
-            frame = review_frame(session, int(item["id"]), user, decision, reason,
-                                 int(revision) if revision is not None else None)
+            frame = review_frame(session, db_int(item.get("id"), "id", minimum=0), user, decision, reason,
+                                 db_int(revision, "revision") if revision is not None else None)
             results.append({"id": frame.id, "status": 200, "frame": current_item(session, frame.id)})
         except ServiceError as exc:
             result = {"id": item.get("id"), "status": exc.status, "error": str(exc)}
@@ -76,7 +80,7 @@ def review_many(session: Session, items: Sequence[dict[str, Any]], user: User | 
                 result["frame"] = current_item(session, int(item["id"]))
             results.append(result)
         except (KeyError, TypeError, ValueError):
-            results.append({"id": item.get("id") if isinstance(item, dict) else None, "status": 400,
+            results.append({"id": item.get("id"), "status": 400,
                             "error": "each item needs an integer id (and optionally revision)"})
     return results
 

@@ -63,7 +63,7 @@ def segment(settings: Settings, media: MediaStore, frame: Frame, body: dict[str,
         labels = np.asarray(body.get("labels") or [], dtype=np.int64).reshape(-1)
         box = body.get("box")
         box = tuple(float(v) for v in box) if box is not None else None
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise InvalidInput("points must be [[x, y], …], labels [1|0, …], box [x0, y0, x1, y1]") from None
     if box is not None and len(box) != 4:
         raise InvalidInput("box must be [x0, y0, x1, y1]")

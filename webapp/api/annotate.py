@@ -11,6 +11,7 @@ from dataset.models import Frame, RegionKind, Role, User
 from dataset.services import annotate, leases, segmentation
 from dataset.services import jobs as job_service
 from dataset.services.errors import InvalidInput, NotFound
+from dataset.services.validate import db_int, optional_text
 from webapp.api.blueprint import api, get_or_404, json_body
 from webapp.auth import requires
 from webapp.runtime import runtime
@@ -79,10 +80,7 @@ def segment(frame_id: int) -> ResponseReturnValue:
 @requires(Role.annotator)
 def save_annotation(frame_id: int) -> ResponseReturnValue:
     body = json_body()
-    try:
-        version = int(body["version"])
-    except (KeyError, TypeError, ValueError):
-        raise InvalidInput("version (the annotation_version you loaded) is required") from None
+    version = db_int(body.get("version"), "version (the annotation_version you loaded)", minimum=0)
     submit = bool(body.get("submit", True))
     ann = annotate.save_annotation(g.db, frame_id, current_user, version=version, regions=body.get("regions", []),
                                    illusion_type=body.get("illusion_type"), submit=submit)
@@ -97,7 +95,7 @@ def save_annotation(frame_id: int) -> ResponseReturnValue:
 @api.post("/frames/<int:frame_id>/delete")
 @requires(Role.annotator)
 def delete_frame(frame_id: int) -> ResponseReturnValue:
-    frame = annotate.delete_frame(g.db, frame_id, current_user, str(json_body().get("reason", "")))
+    frame = annotate.delete_frame(g.db, frame_id, current_user, optional_text(json_body().get("reason"), "reason"))
     g.db.commit()
     return {"frame_id": frame.id, "state": frame.state.value}
 
@@ -106,10 +104,11 @@ def delete_frame(frame_id: int) -> ResponseReturnValue:
 @requires(Role.annotator)
 def propagate(frame_id: int) -> ResponseReturnValue:
     body = json_body()
+    pair, count = db_int(body.get("pair"), "pair", minimum=0), db_int(body.get("count", 5), "count")
     try:
-        pair, kind, count = int(body["pair"]), RegionKind(body["kind"]).value, int(body.get("count", 5))
-    except (KeyError, TypeError, ValueError):
-        raise InvalidInput("send pair, kind (illusion|support), mask (COCO RLE) and count") from None
+        kind = RegionKind(body.get("kind")).value
+    except ValueError:
+        raise InvalidInput("kind must be illusion or support") from None
     if not 1 <= count <= 100:
         raise InvalidInput("count must be 1..100 frames")
     frame = get_or_404(Frame, frame_id, "frame")

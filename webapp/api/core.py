@@ -17,6 +17,7 @@ from dataset.services import users as user_service
 from dataset.services.errors import InvalidInput, NotFound
 from dataset.services.frames import frames_page, funnel_counts, parse_state
 from dataset.services.paging import keyset_page
+from dataset.services.validate import optional_text
 from webapp.api.blueprint import api, cursor_args, int_arg, json_body
 from webapp.api.openapi import openapi_document
 from webapp.auth import requires
@@ -46,8 +47,9 @@ def list_users() -> ResponseReturnValue:
 @requires(Role.admin)
 def create_user() -> ResponseReturnValue:
     body = json_body()
-    user = user_service.create_user(g.db, str(body.get("name", "")), str(body.get("role", "")),
-                                    str(body.get("password", "")))
+    user = user_service.create_user(g.db, optional_text(body.get("name"), "name"),
+                                    optional_text(body.get("role"), "role"),
+                                    optional_text(body.get("password"), "password"))
     g.db.commit()
     return user_service.user_json(user), 201
 
@@ -58,7 +60,7 @@ def frames() -> ResponseReturnValue:
     state = request.args.get("state")
     items, total, page = frames_page(
         g.db, video_id=int_arg("video_id"), state=parse_state(state) if state else None,
-        limit=int_arg("limit", 100) or 100, offset=int_arg("offset", 0) or 0, **cursor_args(),
+        limit=int_arg("limit", 100, minimum=1, maximum=500), offset=int_arg("offset", 0, minimum=0), **cursor_args(),
     )
     return {"items": items, "total": total, "prev": page.prev, "next": page.next}
 
@@ -85,7 +87,7 @@ def list_jobs() -> ResponseReturnValue:
         if state not in JobState.__members__:
             raise InvalidInput(f"state must be one of {', '.join(JobState)}")
         query = query.where(Job.state == JobState(state))
-    limit = min(max(int_arg("limit", 50) or 50, 1), 500)
+    limit = int_arg("limit", 50, minimum=1, maximum=500)
     page = keyset_page(g.db, query, (Job.id,), limit=limit, descending=True, **cursor_args())
     return {"items": [job_service.job_json(row[0]) for row in page.rows], "prev": page.prev, "next": page.next}
 

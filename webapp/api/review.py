@@ -9,7 +9,8 @@ from flask_login import current_user
 from annotation.vlm import QUESTION_LABELS
 from dataset.models import Role
 from dataset.services import review as review_service
-from dataset.services.errors import Conflict, InvalidInput
+from dataset.services.errors import Conflict
+from dataset.services.validate import db_int, optional_text
 from webapp.api.blueprint import api, cursor_args, int_arg, json_body
 from webapp.auth import requires
 
@@ -20,7 +21,7 @@ def review_frames() -> ResponseReturnValue:
     listing = review_service.review_page(
         g.db, video_id=int_arg("video_id"), state=request.args.get("state", "prefiltered"),
         keep=request.args.get("keep") or None, question=int_arg("question"), answer=request.args.get("answer") or None,
-        limit=int_arg("limit", 60) or 60, offset=int_arg("offset", 0) or 0, **cursor_args())
+        limit=int_arg("limit", 60, minimum=1, maximum=500), offset=int_arg("offset", 0, minimum=0), **cursor_args())
     return {"items": listing.items, "total": listing.total, "total_exact": listing.total_exact,
             "prev": listing.prev, "next": listing.next, "reasons": list(review_service.REJECT_REASONS),
             "questions": list(QUESTION_LABELS)}
@@ -31,11 +32,11 @@ def review_frames() -> ResponseReturnValue:
 def review_frame(frame_id: int) -> ResponseReturnValue:
     body = json_body()
     revision = body.get("revision")
-    if revision is not None and not isinstance(revision, int):
-        raise InvalidInput("revision must be an integer (the frame's revision you loaded)")
+    if revision is not None:
+        revision = db_int(revision, "revision")
     try:
-        frame = review_service.review_frame(g.db, frame_id, current_user, str(body.get("decision", "")),
-                                            str(body.get("reason", "")), revision)
+        frame = review_service.review_frame(g.db, frame_id, current_user, optional_text(body.get("decision"), "decision"),
+                                            optional_text(body.get("reason"), "reason"), revision)
     except Conflict as exc:
         g.db.rollback()
         current = review_service.current_item(g.db, frame_id)
@@ -51,6 +52,7 @@ def review_bulk() -> ResponseReturnValue:
     body = json_body()
     items = body.get("items")
     results = review_service.review_many(g.db, items if isinstance(items, list) else [], current_user,
-                                         str(body.get("decision", "")), str(body.get("reason", "")))
+                                         optional_text(body.get("decision"), "decision"),
+                                         optional_text(body.get("reason"), "reason"))
     g.db.commit()
     return {"results": results}

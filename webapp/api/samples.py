@@ -10,6 +10,7 @@ from dataset.models import Role, Sample, User
 from dataset.services import evaluations, sample_review
 from dataset.services import jobs as job_service
 from dataset.services.errors import InvalidInput
+from dataset.services.validate import optional_text
 from webapp.api.blueprint import api, cursor_args, get_or_404, int_arg, json_body
 from webapp.auth import requires
 from webapp.runtime import runtime
@@ -26,7 +27,7 @@ def list_samples() -> ResponseReturnValue:
     items, total, page = sample_review.samples_page(
         g.db, state=request.args.get("state") or None,
         flagged=None if flagged in (None, "") else flagged == "true",
-        limit=int_arg("limit", 60) or 60, offset=int_arg("offset", 0) or 0, **cursor_args())
+        limit=int_arg("limit", 60, minimum=1, maximum=500), offset=int_arg("offset", 0, minimum=0), **cursor_args())
     return {"items": items, "total": total, "prev": page.prev, "next": page.next}
 
 
@@ -42,7 +43,7 @@ def _samples_by_error(evaluation_id: int) -> dict[str, object]:
         min_error = float(raw_min) if raw_min else None
     except ValueError:
         raise InvalidInput("min_error must be a number (EPE in pixels, bad-2 in percent)") from None
-    limit, offset = int_arg("limit", 60) or 60, int_arg("offset", 0) or 0
+    limit, offset = int_arg("limit", 60, minimum=1, maximum=500), int_arg("offset", 0, minimum=0)
     items, total = evaluations.samples_by_error(
         g.db, evaluation_id, method=request.args.get("method") or None, region=request.args.get("region") or "all",
         metric=SORTS[sort], min_error=min_error, limit=limit, offset=offset)
@@ -63,7 +64,8 @@ def get_sample(sample_id: int) -> ResponseReturnValue:
 @requires(Role.curator)
 def review_sample(sample_id: int) -> ResponseReturnValue:
     body = json_body()
-    sample_review.review_sample(g.db, sample_id, current_user, str(body.get("decision", "")), str(body.get("reason", "")))
+    sample_review.review_sample(g.db, sample_id, current_user, optional_text(body.get("decision"), "decision"),
+                                optional_text(body.get("reason"), "reason"))
     g.db.commit()
     return sample_review.get_sample(g.db, sample_id)
 

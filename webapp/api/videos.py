@@ -10,13 +10,14 @@ from flask_login import current_user
 from sqlalchemy import func, select
 
 from annotation.vlm import BACKEND_NAMES
-from dataset.ingest.sources import VIDEO_EXTENSIONS
+from dataset.ingest.sources import VIDEO_EXTENSIONS, image_kind
 from dataset.models import FrameCount, Role, User, Video
 from dataset.services import jobs as job_service
 from dataset.services.errors import InvalidInput
 from dataset.services.ingest import DEFAULT_DEDUP_HAMMING, ingest_params
 from dataset.services.paging import keyset_page
 from dataset.services.prefilter import launch_prefilter
+from dataset.services.validate import db_int
 from webapp.api.blueprint import api, cursor_args, int_arg, json_body
 from webapp.auth import requires
 from webapp.runtime import runtime
@@ -25,7 +26,7 @@ from webapp.runtime import runtime
 @api.get("/videos")
 @requires(Role.annotator)
 def list_videos() -> ResponseReturnValue:
-    limit = min(max(int_arg("limit", 100) or 100, 1), 1000)
+    limit = int_arg("limit", 100, minimum=1, maximum=1000)
     page = keyset_page(g.db, select(Video, Video.id), (Video.id,), limit=limit, descending=True, **cursor_args())
     videos = [row[0] for row in page.rows]
     counts = dict(g.db.execute(select(FrameCount.video_id, func.sum(FrameCount.n))
@@ -47,10 +48,16 @@ def upload_video() -> ResponseReturnValue:
     ext = Path(name).suffix.lower()
     if ext not in VIDEO_EXTENSIONS:
         raise InvalidInput(f"{name}: not a video file name (expected one of {', '.join(sorted(VIDEO_EXTENSIONS))})")
+    head = upload.stream.read(16)
+    upload.stream.seek(0)
+    if kind := image_kind(head):
+        raise InvalidInput(f"{name} is a {kind} image, not a video; upload a video file")
     try:
         fps = float(request.form.get("fps") or 2.0)
     except ValueError:
         raise InvalidInput("fps must be a number") from None
+    if not 0 <= fps <= 1000:
+        raise InvalidInput("fps must be in 0..1000 (0: every frame)")
     params = ingest_params("", fps=fps or None, source=request.form.get("source") or None,
                            illusion_types=request.form.getlist("illusion_type"),
                            dedup_hamming=DEFAULT_DEDUP_HAMMING, user_id=current_user.id, original_name=name,
@@ -70,8 +77,8 @@ def start_prefilter() -> ResponseReturnValue:
     """Queue prefilter jobs: body ``{"video_id"?, "backend"?, "sparse"?}``."""
     body = json_body()
     video_id = body.get("video_id")
-    if video_id is not None and not isinstance(video_id, int):
-        raise InvalidInput("video_id must be an integer")
+    if video_id is not None:
+        video_id = db_int(video_id, "video_id", minimum=0)
     backend = body.get("backend") or None
     if backend is not None and backend not in BACKEND_NAMES:
         raise InvalidInput(f"backend must be one of {', '.join(BACKEND_NAMES)}")

@@ -13,6 +13,7 @@ from webapp.cli.export import export_cmd, import_cmd
 from webapp.cli.geometry import geometry
 from webapp.cli.ingest import frames, ingest, prefilter
 from webapp.cli.jobs import jobs, worker
+from webapp.cli.media import media
 from webapp.cli.model import predict
 from webapp.cli.selftest import selftest
 from webapp.cli.state import CliState
@@ -36,5 +37,5 @@ def main(ctx: click.Context, data_dir: Path | None) -> None:
 
 for command in (init, serve, worker, demo, synth, ingest, prefilter, frames, users, jobs, geometry, bench, selftest,
                 import_capture, import_reconstruction, export_cmd, import_cmd, train, runs, predict,
-                evaluate_cmd):
+                evaluate_cmd, media):
     main.add_command(command)
