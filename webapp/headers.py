@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from flask import Flask, Response, request
 
-from webapp.settings import Settings
+from dataset.settings import Settings
 
 COMMON = ("default-src 'self'", "base-uri 'self'", "form-action 'self'", "frame-ancestors 'self'",
           "object-src 'none'", "img-src 'self' data: blob:", "font-src 'self' data:")
