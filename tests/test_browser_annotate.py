@@ -107,7 +107,7 @@ def test_annotator_clicks_pairs_submits_and_a_second_annotator_works_alongside(b
         # a click inside the picture gives its mask; the round trip is on show
         picture = truth(home, frame["index"], "illusion_00")
         click_image(page, *interior(picture))
-        page.wait_for_function("window.annotator.pairs[0].illusion > 0")
+        page.wait_for_function("() => window.annotator.pairs[0].illusion > 0")
         # "mask in 48 ms", or seconds on a loaded machine: only that a figure is shown matters here
         expect(page.locator("#timing")).to_have_text(re.compile(r"^mask in (\d+ ms|\d+(\.\d+)? s)$"))
         expect(page.locator("[data-pair='1'] [data-chip=illusion]")).to_have_attribute("data-done", "yes")
@@ -117,7 +117,7 @@ def test_annotator_clicks_pairs_submits_and_a_second_annotator_works_alongside(b
         assert shown_frame(page)["id"] == frame["id"]
         assert page.evaluate("window.annotator.pairs[0].illusion") > 0
         expect(page.locator("#message")).to_have_text("Restored your unsaved changes from this browser.")
-        page.wait_for_function("!window.annotator.dirty", timeout=10_000)  # and the autosave follows
+        page.wait_for_function("() => !window.annotator.dirty", timeout=10_000)  # and the autosave follows
         expect(page.locator("#save-state")).to_have_text("Draft saved")
         draft = page.request.get(f"{url}/api/v1/frames/{frame['id']}").json()
         assert [r["kind"] for r in draft["regions"]] == ["illusion"] and not draft["submitted"]
@@ -139,7 +139,7 @@ def test_annotator_clicks_pairs_submits_and_a_second_annotator_works_alongside(b
             assert (after_area > before) if grows else (0 < after_area < before), (button, before, after_area)
             page.keyboard.press("Control+z")  # back to the first mask for what follows
             page.wait_for_function("([before]) => window.annotator.pairs[0].illusion === before", arg=[before])
-        page.wait_for_function("!window.annotator.dirty", timeout=10_000)
+        page.wait_for_function("() => !window.annotator.dirty", timeout=10_000)
 
         # a brush stroke is the latest word on the mask: the last click's timing and message go
         page.keyboard.press("b")
@@ -154,13 +154,13 @@ def test_annotator_clicks_pairs_submits_and_a_second_annotator_works_alongside(b
         expect(page.locator("#timing")).to_have_text("")
         page.keyboard.press("Control+z")
         page.keyboard.press("c")
-        page.wait_for_function("!window.annotator.dirty", timeout=10_000)
+        page.wait_for_function("() => !window.annotator.dirty", timeout=10_000)
 
         # its support: the wall band around the picture
         page.keyboard.press("s")
         band = truth(home, frame["index"], "support_00")
         click_image(page, *interior(band))
-        page.wait_for_function("window.annotator.pairs[0].support > 0")
+        page.wait_for_function("() => window.annotator.pairs[0].support > 0")
         page.keyboard.press("Enter")  # no type yet: the dialog asks, with its first type focused
         expect(page.locator("#type-dialog")).to_be_visible()
         expect(page.locator("#type-dialog .choice").first).to_be_focused()
@@ -172,7 +172,7 @@ def test_annotator_clicks_pairs_submits_and_a_second_annotator_works_alongside(b
         expect(page.locator("#illusion-type")).to_have_value("picture")
         # a pair may have a type of its own (a frame can hold a picture and a mirror)
         page.select_option("#pairs [data-pair='1'] select.pair-type", "mirror")
-        page.wait_for_function("window.annotator.pairs[0].type === 'mirror'")
+        page.wait_for_function("() => window.annotator.pairs[0].type === 'mirror'")
         page.locator("#canvas").focus()
         page.screenshot(path=str(SHOTS / "annotate-1-pair.png"))
 
@@ -209,7 +209,7 @@ def test_annotator_clicks_pairs_submits_and_a_second_annotator_works_alongside(b
         # the second annotator, in parallel, gets another frame and can't take or overwrite this one's
         mine = after["id"]
         click_image(page, *interior(truth(home, after["index"], "illusion_01")))  # the mirror
-        page.wait_for_function("window.annotator.pairs[0].illusion > 0 && !window.annotator.dirty", timeout=10_000)
+        page.wait_for_function("() => window.annotator.pairs[0].illusion > 0 && !window.annotator.dirty", timeout=10_000)
         version = page.request.get(f"{url}/api/v1/frames/{mine}").json()["annotation_version"]
         assert version >= 1
 
@@ -276,7 +276,7 @@ def test_annotator_clicks_pairs_submits_and_a_second_annotator_works_alongside(b
         assert shown_frame(page)["id"] == mine
         expect(page.locator("#banner-action")).to_have_text("Use my changes")
         page.click("#banner-action")
-        page.wait_for_function("window.annotator.pairs[0].support > 0 && !window.annotator.dirty", timeout=10_000)
+        page.wait_for_function("() => window.annotator.pairs[0].support > 0 && !window.annotator.dirty", timeout=10_000)
         assert page.request.get(f"{url}/api/v1/frames/{mine}").json()["annotation_version"] == version + 2
 
         # delete with a reason: the frame leaves the pipeline and the next one comes

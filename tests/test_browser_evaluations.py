@@ -17,7 +17,7 @@ from tests.evaluations_data import evaluated_database
 from webapp.runtime import Runtime
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
-PICTURES_LOADED = "[...document.querySelectorAll('.evaluation-pictures img')].every(i => i.complete && i.naturalWidth > 0)"
+PICTURES_LOADED = "() => [...document.querySelectorAll('.evaluation-pictures img')].every(i => i.complete && i.naturalWidth > 0)"
 
 
 @pytest.fixture(scope="module")

@@ -77,11 +77,11 @@ def test_admin_launches_a_run_and_sees_its_chart_grow(browser, server: str, tmp_
     form.locator("button[type=submit]").click()
     page.wait_for_url(f"{server}/models/runs/*")
     points = "Number(document.querySelector('#charts svg[aria-label=\"training loss\"]').dataset.points || 0)"
-    page.wait_for_function(f"{points} > 0", timeout=180_000)
+    page.wait_for_function(f"() => {points} > 0", timeout=180_000)
     first = page.evaluate(points)
-    page.wait_for_function(f"{points} > {first} || document.getElementById('run').dataset.state === 'succeeded'",
+    page.wait_for_function(f"() => {points} > {first} || document.getElementById('run').dataset.state === 'succeeded'",
                            timeout=180_000)
-    page.wait_for_function("document.getElementById('run').dataset.state === 'succeeded'", timeout=180_000)
+    page.wait_for_function("() => document.getElementById('run').dataset.state === 'succeeded'", timeout=180_000)
     assert page.evaluate(points) > first, "the chart never grew while the run went"
     assert page.locator("#fig-step").inner_text() == "12/12"
     assert page.locator("#checkpoints tbody a").count() >= 1

@@ -24,7 +24,7 @@ def test_curator_reviews_frames_with_the_keyboard_and_the_funnel_follows(browser
 
         page.click("[data-nav=review]")
         # the demo's worker ingests and prefilters its video meanwhile; the empty grid keeps looking
-        page.wait_for_function("document.querySelectorAll('#review-grid .tile').length >= 6", timeout=120_000)
+        page.wait_for_function("() => document.querySelectorAll('#review-grid .tile').length >= 6", timeout=120_000)
         tiles = page.locator("#review-grid .tile")
         ids = [int(i) for i in tiles.evaluate_all("nodes => nodes.map(n => n.dataset.id)")]
         tile = [tiles.nth(i) for i in range(6)]
@@ -72,7 +72,7 @@ def test_curator_reviews_frames_with_the_keyboard_and_the_funnel_follows(browser
         expect(viewer).to_be_visible()
         expect(viewer.locator("h2")).to_contain_text(f"Frame #{ids[3]}")
         expect(viewer.locator(".questions tr")).to_have_count(12)
-        page.wait_for_function("document.getElementById('viewer-image').naturalWidth > 0")
+        page.wait_for_function("() => document.getElementById('viewer-image').naturalWidth > 0")
         keys.press("Escape")
         expect(viewer).to_be_hidden()
         expect(tile[3]).to_be_focused()

@@ -56,7 +56,7 @@ def test_curator_reviews_samples_and_sees_them_in_2d_and_3d(browser, tmp_path: P
         ids = [int(i) for i in tiles.evaluate_all("nodes => nodes.map(n => n.dataset.id)")]
         expect(tiles.nth(0)).to_be_focused()
         assert tiles.nth(0).locator(".metrics dt").all_inner_texts() == ["holes", "EPE", "inliers", "scale"]
-        page.wait_for_function("[...document.querySelectorAll('#samples-grid img')].every(i => i.complete && i.naturalWidth > 0)")
+        page.wait_for_function("() => [...document.querySelectorAll('#samples-grid img')].every(i => i.complete && i.naturalWidth > 0)")
         page.screenshot(path=str(tmp_path / "samples-grid.png"))
 
         keys = page.keyboard
@@ -82,7 +82,7 @@ def test_curator_reviews_samples_and_sees_them_in_2d_and_3d(browser, tmp_path: P
         page.wait_for_url(url + f"/samples/{ids[2]}")
         views = page.locator(".views figure.view img")
         expect(views).to_have_count(5)
-        page.wait_for_function("[...document.querySelectorAll('.views img')].every(i => i.complete && i.naturalWidth > 0)")
+        page.wait_for_function("() => [...document.querySelectorAll('.views img')].every(i => i.complete && i.naturalWidth > 0)")
         lo = float(page.locator(".colorbar [data-end=lo]").inner_text())
         hi = float(page.locator(".colorbar [data-end=hi]").inner_text())
         assert 0 < lo < hi

@@ -40,7 +40,7 @@ def test_each_role_logs_in_and_sees_its_navigation(browser, demo_url: str, role:
     assert nav == NAV[role]
     assert page.locator(".user").get_attribute("data-role") == role
     # the import job of the demo's video lands while we watch: the live funnel shows its frames
-    page.wait_for_function("Number(document.querySelector('[data-stage=frames] .count').textContent) > 0",
+    page.wait_for_function("() => Number(document.querySelector('[data-stage=frames] .count').textContent) > 0",
                            timeout=120_000)
     page.screenshot(path=str(tmp_path / f"dashboard-{role}.png"), full_page=True)
     if role == "admin":
@@ -48,7 +48,7 @@ def test_each_role_logs_in_and_sees_its_navigation(browser, demo_url: str, role:
         assert page.locator("table.users").inner_text().count("-demo") == 0  # passwords are never shown
         assert "curator" in page.locator("table.users").inner_text()
     page.click("[data-nav=frames]")
-    page.wait_for_function("[...document.querySelectorAll('#frame-grid img')].some(i => i.complete && i.naturalWidth > 0)")
+    page.wait_for_function("() => [...document.querySelectorAll('#frame-grid img')].some(i => i.complete && i.naturalWidth > 0)")
     page.click("[data-nav=jobs]")
     page.wait_for_selector("#jobs tbody tr[data-state=succeeded]", timeout=120_000)
     kinds = set(page.locator("#jobs tbody tr td:nth-child(2)").all_inner_texts())
