@@ -56,7 +56,8 @@ def test_curator_reviews_samples_and_sees_them_in_2d_and_3d(browser, tmp_path: P
         ids = [int(i) for i in tiles.evaluate_all("nodes => nodes.map(n => n.dataset.id)")]
         expect(tiles.nth(0)).to_be_focused()
         assert tiles.nth(0).locator(".metrics dt").all_inner_texts() == ["holes", "EPE", "inliers", "scale"]
-        page.wait_for_function("() => [...document.querySelectorAll('#samples-grid img')].every(i => i.complete && i.naturalWidth > 0)")
+        page.wait_for_function("() => [...document.querySelectorAll('#samples-grid img')]"
+                               ".every(i => i.complete && i.naturalWidth > 0)")
         page.screenshot(path=str(tmp_path / "samples-grid.png"))
 
         keys = page.keyboard

@@ -176,7 +176,7 @@ def test_bad_authors_input(fresh: Runtime, tmp_path: Path) -> None:
     depth = root / "depth_rect/vid_a/scene_1/frame_0007.png"
     os.rename(depth, depth.with_suffix(".bak"))
     job = import_(fresh, root, "authors")
-    assert job.state == JobState.failed and f"{depth}: missing" in job.error
+    assert job.state == JobState.failed and f"{depth.name}: missing" in job.error
     os.rename(depth.with_suffix(".bak"), depth)
     cv2.imwrite(str(root / "sam_mask/vid_a/scene_1/frame_0007-00-00-illusion.jpg"), np.zeros((8, 8), np.uint8))
     assert "8x8 pixels, but its frame is 40x32" in import_(fresh, root, "authors").error

@@ -277,7 +277,7 @@ def test_bad_input_is_refused_with_a_clear_error(source: Runtime, fresh: Runtime
     victim = out / manifest["samples"][2]["files"]["disparity"]["path"]
     victim.unlink()
     job = import_(fresh, out)
-    assert job.state == JobState.failed and str(victim) in job.error and "missing" in job.error
+    assert job.state == JobState.failed and f"{victim.name}: missing" in job.error and str(victim) not in job.error
     export(source, out, overwrite=True)
     mask = out / manifest["samples"][1]["files"]["masks"]["illusion_00"]["path"]
     mask.write_bytes(b"not a png")

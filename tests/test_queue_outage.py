@@ -97,7 +97,7 @@ def test_a_message_lost_after_commit_is_sent_again_and_runs_once(runtime: Runtim
             job_id = runtime.queue.submit(s, "ingest", ingest_params(str(video)), None).id
     assert job_id not in pending_job_ids(huey)
 
-    sweep = UnsentSweep(huey, runtime.queue._run, HANDLERS, grace_s=0.0)
+    sweep = UnsentSweep(huey, runtime.queue._tasks["default"], HANDLERS, grace_s=0.0)
     assert sweep(runtime.sessions) == [job_id]
     assert sweep(runtime.sessions) == []  # its message waits now: nothing to re-send
     sweep(runtime.sessions)

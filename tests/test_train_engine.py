@@ -79,7 +79,9 @@ def test_a_run_writes_events_checkpoints_validation_and_tensorboard(native: Path
 def test_two_gloo_processes_equal_one_with_the_same_global_batch(native: Path, tmp_path: Path) -> None:
     one = make_run(tmp_path / "one", native, val=False, steps=3, checkpoint_every=3)
     two = make_run(tmp_path / "two", native, val=False, steps=3, checkpoint_every=3)
-    assert train_here(one) == EXIT_SUCCEEDED
+    # Both under torchrun, so both ranks' kernels run with the thread count it gives them: a
+    # different count reorders float sums, and Adam amplifies such rounding in tiny gradients.
+    assert run_engine(torchrun_command(one, 1)).returncode == EXIT_SUCCEEDED
     result = run_engine(torchrun_command(two, 2))
     assert result.returncode == EXIT_SUCCEEDED, result.stderr[-3000:]
     assert events(two, "start")[0]["world_size"] == 2

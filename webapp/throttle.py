@@ -9,6 +9,7 @@ by every process on the machine, like the default job queue.
 
 from __future__ import annotations
 
+import logging
 import sqlite3
 import threading
 import time
@@ -22,6 +23,7 @@ from limits.storage import Storage
 
 from dataset.settings import Settings
 
+log = logging.getLogger(__name__)
 limiter = Limiter(key_func=get_remote_address)
 
 
@@ -50,17 +52,28 @@ def token_limit(settings: Settings) -> RateLimitItem:
 
 
 def token_blocked(settings: Settings) -> int | None:
-    """Seconds this address must wait before it may try a bearer token again, or None."""
+    """Seconds this address must wait before it may try a bearer token again, or None.
+
+    Fails open while the counters' storage is unreachable (Redis down), as the login limits do
+    (``RATELIMIT_SWALLOW_ERRORS``): an outage of the counters must not lock every script out, and
+    the requests that need the queue on that Redis answer 503 anyway."""
     item = token_limit(settings)
     address = get_remote_address()
-    if limiter.limiter.test(item, "token", address):
+    try:
+        if limiter.limiter.test(item, "token", address):
+            return None
+        reset = limiter.limiter.get_window_stats(item, "token", address).reset_time
+    except Exception:  # redis.ConnectionError, sqlite3.Error …: the storage is down
+        log.warning("token throttling skipped: its counters are unreachable", exc_info=True)
         return None
-    reset = limiter.limiter.get_window_stats(item, "token", address).reset_time
     return max(1, int(reset - time.time()) + 1)
 
 
 def count_bad_token(settings: Settings) -> None:
-    limiter.limiter.hit(token_limit(settings), "token", get_remote_address())
+    try:
+        limiter.limiter.hit(token_limit(settings), "token", get_remote_address())
+    except Exception:  # see token_blocked
+        log.warning("a bad token went uncounted: the throttle's counters are unreachable", exc_info=True)
 
 
 def storage_uri(settings: Settings) -> str:
@@ -71,7 +84,8 @@ def storage_uri(settings: Settings) -> str:
 
 def init_throttle(app: Flask, settings: Settings) -> None:
     app.config.update(RATELIMIT_STORAGE_URI=storage_uri(settings), RATELIMIT_STRATEGY="fixed-window",
-                      RATELIMIT_HEADERS_ENABLED=True, RATELIMIT_KEY_PREFIX=f"{settings.queue_name}:limits")
+                      RATELIMIT_HEADERS_ENABLED=True, RATELIMIT_SWALLOW_ERRORS=True,
+                      RATELIMIT_KEY_PREFIX=f"{settings.queue_name}:limits")
     limiter.init_app(app)
 
 

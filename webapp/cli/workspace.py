@@ -197,27 +197,29 @@ def _prepare_demo(rt: Runtime) -> None:
 
 
 def _train_demo_model(rt: Runtime) -> None:
-    """Accept the generated samples and train a short `lite` run on them, marked as the current model."""
+    """Accept the generated samples and train a short `lite` run on them, marked as the current model
+    (with too few videos for its splits, neither)."""
     from dataset.services import training
     from dataset.services.demo import accept_generated_samples
     from dataset.services.errors import InvalidInput
     from webapp.jobs import runs as run_control
     from webapp.jobs.handlers import HANDLERS
 
-    with transaction(rt.sessions) as s:
-        curator = s.scalar(select(User).where(User.name == Role.curator.value))
-        admin = s.scalar(select(User).where(User.name == Role.admin.value))
-        accepted = accept_generated_samples(s, curator)
-    click.echo(f"{accepted} generated samples accepted", err=True)
     if importlib.util.find_spec("torch") is None:
         click.echo("no demo training run: torch is not installed (pip install -e '.[models]')", err=True)
         return
     try:
+        # One transaction: samples are accepted only for a run that can start, so a demo too small
+        # to train on leaves them for a curator to review.
         with transaction(rt.sessions) as s:
+            curator = s.scalar(select(User).where(User.name == Role.curator.value))
+            admin = s.scalar(select(User).where(User.name == Role.admin.value))
+            accepted = accept_generated_samples(s, curator)
             run = run_control.launch(rt, s, preset="lite", overrides=DEMO_TRAIN, selection=training.DataSelection(),
                                      launch=training.Launch(split=training.parse_split(training.DEFAULT_SPLIT)),
                                      user=s.get(User, admin.id))
             run_id = run.id
+        click.echo(f"{accepted} generated samples accepted", err=True)
     except InvalidInput as exc:
         click.echo(f"no demo training run: {exc}", err=True)
         return
