@@ -1,27 +1,14 @@
-"""Validation pictures for people: left | ground truth | prediction | confidence | error, side by side.
-
-The product's colouring lives in ``webapp/preview/images.py``, which the model may not import;
-this is the same TURBO colour map, called directly through OpenCV.
-"""
+"""Validation pictures for people: left | ground truth | prediction | confidence | error, side by side,
+in the product's colours (``dataset/preview/images.py``: disparities TURBO, errors INFERNO)."""
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
+from dataset.preview.images import colorize, colorize_error
+
 PANELS = ("left", "ground_truth", "prediction", "confidence", "error")
-ERROR_RANGE_PX = (0.0, 5.0)  # bad-5 saturates: every pixel that red is wrong by 5 px or more
-_NO_VALUE_RGB = (40, 40, 40)
-
-
-def colorize(values: np.ndarray, lo: float, hi: float) -> np.ndarray:
-    """A float H×W map as RGB uint8 H×W×3 through TURBO, ``lo`` blue → ``hi`` red; non-finite grey."""
-    finite = np.isfinite(values)
-    span = hi - lo if hi > lo else 1.0
-    levels = np.clip((np.where(finite, values, lo) - lo) / span * 255.0, 0, 255).round().astype(np.uint8)
-    rgb = cv2.cvtColor(cv2.applyColorMap(levels, cv2.COLORMAP_TURBO), cv2.COLOR_BGR2RGB)
-    rgb[~finite] = _NO_VALUE_RGB
-    return rgb
+ERROR_MAX_PX = 5.0  # bad-5 saturates: every pixel that bright is wrong by 5 px or more
 
 
 def prediction_strip(left: np.ndarray, gt: np.ndarray, pred: np.ndarray, confidence: np.ndarray) -> np.ndarray:
@@ -32,15 +19,7 @@ def prediction_strip(left: np.ndarray, gt: np.ndarray, pred: np.ndarray, confide
     """
     finite = gt[np.isfinite(gt)]
     lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (float(np.nanmin(pred)), float(np.nanmax(pred)))
-    error = np.abs(pred - gt)  # NaN where gt is invalid: grey
+    error = np.abs(pred - gt)  # NaN where gt is invalid: shown as "no value"
     panels = [left, colorize(gt, lo, hi), colorize(pred, lo, hi), colorize(confidence, 0.0, 1.0),
-              colorize(error, *ERROR_RANGE_PX)]
+              colorize_error(error, ERROR_MAX_PX)]
     return np.concatenate(panels, axis=1)
-
-
-def png_bytes(rgb: np.ndarray) -> bytes:
-    """RGB uint8 H×W×3 as PNG."""
-    ok, buf = cv2.imencode(".png", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
-    if not ok:
-        raise ValueError("could not encode a PNG")
-    return buf.tobytes()

@@ -11,12 +11,13 @@ import numpy as np
 import torch
 
 from dataset.atomic import atomic_write_bytes
+from dataset.preview.images import encode_png
 from dataset.readers import Reader
 from model.metrics import disparity_metrics
 from model.network import FusionNetwork
 from model.predictor import Predictor
 from model.presets import Config
-from model.train.images import png_bytes, prediction_strip
+from model.train.images import prediction_strip
 from model.train.order import validation_noise_seed
 
 REGIONS = ("all", "illusion", "non_illusion")
@@ -51,7 +52,7 @@ def validate(network: FusionNetwork, config: Config, reader: Reader, device: tor
         if i < images:
             relative = Path(VAL_DIR) / f"step_{step:07d}" / f"{_file_stem(sample.name)}.png"
             strip = prediction_strip(sample.left, sample.disparity, pred.disparity, pred.confidence)
-            atomic_write_bytes(run_dir / relative, png_bytes(strip))
+            atomic_write_bytes(run_dir / relative, encode_png(strip))
             written[relative.as_posix()] = strip
     metrics = {region: {name: (sums[region][name] / counts[region] if counts[region] else math.nan)
                         for name in METRICS} for region in REGIONS}
