@@ -29,6 +29,7 @@ bench: $(VENV)/.installed-test
 	$(BIN)/illusion-studio bench prefilter --json
 	$(BIN)/illusion-studio bench click --json
 	$(BIN)/illusion-studio bench generate --json
+	$(BIN)/illusion-studio bench load --json
 	$(BIN)/illusion-studio selftest --json
 
 venv: $(VENV)/.installed

@@ -128,7 +128,8 @@ class User(Base):
 
 
 class ApiToken(Base):
-    """A script's bearer token; only its SHA-256 is stored."""
+    """A script's bearer token ``ist_<id>_<secret>``; only its secret's SHA-256 is stored (of the
+    whole token for the old ``ist_<secret>`` form)."""
 
     __tablename__ = "api_tokens"
 

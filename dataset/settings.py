@@ -7,6 +7,7 @@ module reads the environment; everything else receives a :class:`Settings` insta
 
 from __future__ import annotations
 
+import json
 import os
 import tomllib
 from pathlib import Path
@@ -42,12 +43,15 @@ class Settings(BaseSettings):
     port: int = Field(5000, ge=1, le=65535)
     secret_key: str = Field("", description="Flask session key; default one generated into the data dir.")
     max_upload_mb: int = Field(2048, gt=0)
-    # Security: server-side sessions, login throttling (limits' syntax: "10 per 15 minutes"), HTTPS.
+    # Security: server-side sessions, login and API-token throttling (limits' syntax: "10 per 15 minutes"), HTTPS.
     session_idle_minutes: int = Field(480, ge=1, description="A session unused this long ends.")
     session_lifetime_hours: int = Field(72, ge=1, description="A session ends this long after its login.")
     login_limit_per_account: str = Field("10 per 15 minutes", description="Failed logins per user name.")
     login_limit_per_address: str = Field("50 per 15 minutes", description="Failed logins per client address.")
     token_limit_per_address: str = Field("50 per 15 minutes", description="Bad API tokens per client address.")
+    token_limit_per_account: str = Field(
+        "10 per 15 minutes", description="Wrong secrets for one user's API tokens (tokens ist_<id>_<secret> name their "
+                                         "user; old ist_<secret> ones only count per address).")
     https: bool = Field(False, description="Served over HTTPS (behind a proxy): Secure cookies, HSTS.")
     # Model backends: each has a weight-free default; the others load from a local directory.
     annotation_lease_s: int = Field(600, ge=30, description="How long a frame stays with an annotator without a renewal.")
@@ -90,7 +94,8 @@ class Settings(BaseSettings):
         # Init kwargs carry the TOML file's values, so the environment must rank above them.
         return env_settings, init_settings
 
-    @field_validator("login_limit_per_account", "login_limit_per_address", "token_limit_per_address")
+    @field_validator("login_limit_per_account", "login_limit_per_address", "token_limit_per_address",
+                     "token_limit_per_account")
     @classmethod
     def _rate_limit(cls, value: str) -> str:
         try:
@@ -162,3 +167,12 @@ def load_settings(
         where = ".".join(str(p) for p in err["loc"]) or "settings"
         source = toml_file if toml_file.is_file() else "environment"
         raise SettingsError(f"{source}: {where}: {err['msg']}") from None
+
+
+def write_settings_file(home: Path, **values: Any) -> None:
+    """Write ``values`` as the data dir's settings file, which every process started on ``home`` reads
+    (None values are left out: TOML has no null)."""
+    # TOML basic strings and arrays share JSON's syntax for the values settings take.
+    lines = [f"{key} = {json.dumps(str(value) if isinstance(value, Path) else value)}\n"
+             for key, value in values.items() if value is not None]
+    (home / SETTINGS_FILE).write_text("".join(lines), encoding="utf-8")

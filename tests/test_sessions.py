@@ -2,16 +2,21 @@
 
 from __future__ import annotations
 
+import hashlib
+import re
+import secrets
 from datetime import timedelta
+from pathlib import Path
 
 from click.testing import CliRunner
 from sqlalchemy import select, update
 
-from dataset.db import transaction
-from dataset.models import AuditEntry, Role, User, UserSession, utcnow
+from dataset.db import migrate, transaction
+from dataset.models import ApiToken, AuditEntry, Role, User, UserSession, utcnow
 from dataset.services import users as user_service
-from tests.conftest import PASSWORD, csrf_from, login
+from tests.conftest import PASSWORD, csrf_from, login, make_settings
 from webapp.cli import main as cli
+from webapp.runtime import Runtime
 
 
 def user_id(runtime, name: str) -> int:  # type: ignore[no-untyped-def]
@@ -87,6 +92,55 @@ def test_bad_api_tokens_are_throttled_per_address(client, tokens) -> None:  # ty
     response = client.get("/api/v1/me", headers={"Authorization": f"Bearer {tokens['admin']}"})
     assert response.status_code == 429 and int(response.headers["Retry-After"]) > 0
     assert "too many bad API tokens" in response.json["error"]
+
+
+def bearer(token: str) -> dict[str, str]:
+    return {"Authorization": f"Bearer {token}"}
+
+
+def wrong_secret(token: str) -> str:
+    """The same token id with a secret of the right shape that is not its own."""
+    return token[:-43] + "x" * 43
+
+
+def test_wrong_secrets_for_a_token_are_throttled_per_account(client, runtime, tokens) -> None:  # type: ignore[no-untyped-def]
+    admin = tokens["admin"]
+    assert re.fullmatch(r"ist_[0-9]+_[A-Za-z0-9_-]{43}", admin)
+    with transaction(runtime.sessions) as s:
+        second = user_service.issue_token(s, user_service.get_user(s, "admin"), "second")
+    for _ in range(10):
+        assert client.get("/api/v1/me", headers=bearer(wrong_secret(admin))).status_code == 401
+    for token in (admin, second):  # the right token, and the account's other one, too late
+        response = client.get("/api/v1/me", headers=bearer(token))
+        assert response.status_code == 429 and int(response.headers["Retry-After"]) > 0
+        assert "too many bad API tokens for this account" in response.json["error"]
+    assert client.get("/api/v1/me", headers=bearer(tokens["curator"])).status_code == 200  # other accounts go on
+
+
+def test_old_format_tokens_work_and_count_per_address_only(client, runtime, tokens) -> None:  # type: ignore[no-untyped-def]
+    old = "ist_" + secrets.token_urlsafe(32)
+    with transaction(runtime.sessions) as s:
+        s.add(ApiToken(user_id=user_service.get_user(s, "annotator").id, token_sha256=hashlib.sha256(old.encode()).hexdigest()))
+    assert client.get("/api/v1/me", headers=bearer(old)).json["name"] == "annotator"
+    for _ in range(12):  # wrong old-format tokens name no account: past the per-account limit, still fine
+        assert client.get("/api/v1/me", headers=bearer(wrong_secret(old))).status_code == 401
+    assert client.get("/api/v1/me", headers=bearer(old)).status_code == 200
+    assert client.get("/api/v1/me", headers=bearer(tokens["admin"])).status_code == 200
+
+
+def test_token_throttling_fails_open_while_its_counters_are_down(tmp_path: Path) -> None:
+    from webapp.app import create_app
+
+    settings = make_settings(tmp_path / "down", queue_url="redis://127.0.0.1:1/0")  # nothing listens on port 1
+    migrate(settings.database_url)
+    runtime = Runtime(settings)
+    with transaction(runtime.sessions) as s:
+        token = user_service.issue_token(s, user_service.create_user(s, "cu", "curator", PASSWORD))
+    client = create_app(settings, runtime).test_client()
+    for _ in range(12):
+        assert client.get("/api/v1/me", headers=bearer(wrong_secret(token))).status_code == 401
+    assert client.get("/api/v1/me", headers=bearer(token)).status_code == 200
+    runtime.close()
 
 
 def test_the_throttle_counts_across_processes_in_one_sqlite_file(runtime) -> None:  # type: ignore[no-untyped-def]

@@ -6,11 +6,7 @@ into the workspace's settings file, which the worker processes read too.
 
 from __future__ import annotations
 
-import json
-import os
 import subprocess
-import sys
-import threading
 import time
 import uuid
 from collections.abc import Callable, Iterator
@@ -21,11 +17,10 @@ import pytest
 
 from dataset.db import migrate
 from dataset.models import Job
-from dataset.settings import Settings
+from dataset.settings import Settings, write_settings_file
 from tests.conftest import TEST_REDIS_URL, make_settings
+from webapp.benchmarks import served
 from webapp.runtime import Runtime
-
-ROOT = Path(__file__).resolve().parent.parent
 
 
 @pytest.fixture
@@ -43,8 +38,7 @@ def queue_settings(request: pytest.FixtureRequest, tmp_path: Path, extra_setting
             pytest.skip("Redis queue tests need TEST_REDIS_URL (e.g. redis://127.0.0.1:6379/0)")
         # A queue name of its own, so parallel or leftover runs never share a backlog.
         values.update(queue_url=TEST_REDIS_URL, queue_name=f"test-{uuid.uuid4().hex[:8]}")
-    # TOML basic strings and JSON strings share their escapes, so json.dumps writes valid TOML values here.
-    (home / "illusion-studio.toml").write_text("".join(f"{k} = {json.dumps(v)}\n" for k, v in values.items()))
+    write_settings_file(home, **values)
     settings = make_settings(home)
     migrate(settings.database_url)
     return settings
@@ -67,32 +61,12 @@ def start_worker(queue_settings: Settings) -> Iterator[Callable[..., subprocess.
     procs: list[subprocess.Popen[str]] = []
 
     def start(*args: str) -> subprocess.Popen[str]:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "webapp.cli", "--data-dir", str(queue_settings.home), "worker", *args],
-            cwd=ROOT, env={**os.environ, "PYTHONUNBUFFERED": "1"},
-            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-        procs.append(proc)
-        ready = threading.Event()
-
-        def drain() -> None:  # keep reading, or a chatty worker would block on a full pipe
-            for line in proc.stderr:
-                if " ready" in line:
-                    ready.set()
-
-        threading.Thread(target=drain, daemon=True).start()
-        if not ready.wait(60):
-            raise AssertionError("the worker did not get ready within 60 s")
-        return proc
+        procs.append(served.start_worker(queue_settings.home, *args))
+        return procs[-1]
 
     yield start
     for proc in procs:
-        if proc.poll() is None:
-            proc.terminate()
-    for proc in procs:
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
+        served.stop(proc)
 
 
 def wait_for(rt: Runtime, job_id: int, predicate: Callable[[Job], bool], timeout: float = 90) -> Job:

@@ -11,7 +11,7 @@ from collections.abc import Callable
 from datetime import timedelta
 from typing import Any, TypeVar
 
-from flask import Flask, abort, g, jsonify, redirect, request, session, url_for
+from flask import Flask, abort, current_app, g, jsonify, redirect, request, session, url_for
 from flask_login import AnonymousUserMixin, LoginManager, UserMixin, current_user, login_user, logout_user
 from flask_wtf.csrf import CSRFProtect
 from werkzeug.exceptions import TooManyRequests
@@ -26,6 +26,7 @@ F = TypeVar("F", bound=Callable[..., Any])
 PUBLIC = "public"
 ROLE_ATTR = "required_role"
 SESSION_ID = "sid"  # the cookie's key holding the server-side session's id
+SESSION_ENDED = "Your session ended — log in again."
 
 login_manager = LoginManager()
 csrf = CSRFProtect()
@@ -77,6 +78,17 @@ def json_error(status: int, message: str) -> Any:
     return response
 
 
+def _unauthenticated_message() -> str:
+    """Why an API call is refused, in the words its reader needs.
+
+    A browser carries the app's cookie and no token: its session ended (logged out elsewhere,
+    idle, too old), and the page shows the message. Scripts get the how-to they always got.
+    """
+    if "Authorization" not in request.headers and current_app.config["SESSION_COOKIE_NAME"] in request.cookies:
+        return SESSION_ENDED
+    return "authentication required: log in or send 'Authorization: Bearer <token>'"
+
+
 def sign_in(user: User) -> None:
     """Start a server-side session for ``user`` and put its id in the cookie."""
     # A fresh random id per login: an id seen before (a copied cookie) never comes back to life.
@@ -122,12 +134,14 @@ def init_auth(app: Flask) -> None:
         scheme, _, token = req.headers.get("Authorization", "").partition(" ")
         if scheme.lower() != "bearer" or not token:
             return None
-        settings = runtime().settings
-        if (wait := throttle.token_blocked(settings)) is not None:
-            raise TooManyRequests("too many bad API tokens from this address", retry_after=wait)
-        user = user_service.user_for_token(g.db, token.strip())
+        settings, token = runtime().settings, token.strip()
+        account = user_service.token_account(g.db, token)
+        if (blocked := throttle.token_blocked(settings, account)) is not None:
+            wait, why = blocked
+            raise TooManyRequests(why, retry_after=wait)
+        user = user_service.user_for_token(g.db, token)
         if user is None:
-            throttle.count_bad_token(settings)
+            throttle.count_bad_token(settings, account)
             return None
         if g.db.dirty:
             g.db.commit()  # keep the token's last-used time
@@ -144,7 +158,7 @@ def init_auth(app: Flask) -> None:
         if required != PUBLIC:
             if not current_user.is_authenticated:
                 if is_api_request():
-                    return json_error(401, "authentication required: log in or send 'Authorization: Bearer <token>'")
+                    return json_error(401, _unauthenticated_message())
                 return redirect(url_for("auth.login", next=request.full_path.rstrip("?")))
             if not current_user.allows(required):
                 abort(403, f"needs the {required.value} role")

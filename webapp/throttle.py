@@ -1,4 +1,4 @@
-"""Login throttling with Flask-Limiter: failed attempts per account and per address answer 429.
+"""Login and API-token throttling with Flask-Limiter: failures per account and per address answer 429.
 
 Storage: the deployment's Redis when the queue runs on Redis; otherwise a small SQLite file in the
 data dir (:class:`SqliteLimitStorage`). The `limits` package ships memory, Redis, Memcached and
@@ -47,31 +47,38 @@ def limit_login(view: Any) -> Any:
                          error_message="too many failed logins from this address")(view)
 
 
-def token_limit(settings: Settings) -> RateLimitItem:
-    return parse(settings.token_limit_per_address)
+def _token_limits(settings: Settings, account: int | None) -> list[tuple[RateLimitItem, tuple[str, str], str]]:
+    """(limit, counter key, what the 429 says) for this address and, when the token names one, its account."""
+    checks = [(parse(settings.token_limit_per_address), ("token", get_remote_address()),
+               "too many bad API tokens from this address")]
+    if account is not None:
+        checks.append((parse(settings.token_limit_per_account), ("token-account", str(account)),
+                       "too many bad API tokens for this account"))
+    return checks
 
 
-def token_blocked(settings: Settings) -> int | None:
-    """Seconds this address must wait before it may try a bearer token again, or None.
+def token_blocked(settings: Settings, account: int | None) -> tuple[int, str] | None:
+    """(seconds to wait, why) when this address, or the account ``account`` whose token was sent,
+    may not try a bearer token again yet; else None.
 
     Fails open while the counters' storage is unreachable (Redis down), as the login limits do
     (``RATELIMIT_SWALLOW_ERRORS``): an outage of the counters must not lock every script out, and
     the requests that need the queue on that Redis answer 503 anyway."""
-    item = token_limit(settings)
-    address = get_remote_address()
     try:
-        if limiter.limiter.test(item, "token", address):
-            return None
-        reset = limiter.limiter.get_window_stats(item, "token", address).reset_time
+        for item, key, why in _token_limits(settings, account):
+            if not limiter.limiter.test(item, *key):
+                reset = limiter.limiter.get_window_stats(item, *key).reset_time
+                return max(1, int(reset - time.time()) + 1), why
     except Exception:  # redis.ConnectionError, sqlite3.Error …: the storage is down
         log.warning("token throttling skipped: its counters are unreachable", exc_info=True)
-        return None
-    return max(1, int(reset - time.time()) + 1)
+    return None
 
 
-def count_bad_token(settings: Settings) -> None:
+def count_bad_token(settings: Settings, account: int | None) -> None:
+    """Count a refused bearer token against this address and, when it named one, its account."""
     try:
-        limiter.limiter.hit(token_limit(settings), "token", get_remote_address())
+        for item, key, _ in _token_limits(settings, account):
+            limiter.limiter.hit(item, *key)
     except Exception:  # see token_blocked
         log.warning("a bad token went uncounted: the throttle's counters are unreachable", exc_info=True)
 

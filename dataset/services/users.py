@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import hmac
 import re
 import secrets
 from datetime import timedelta
@@ -16,6 +17,7 @@ from dataset.models import ApiToken, Role, User, utcnow
 from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.sessions import end_user_sessions
+from dataset.services.validate import DB_INT_MAX
 
 _NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")  # always fullmatch: "$" would let "admin\n" through
 MIN_PASSWORD = 8
@@ -73,16 +75,47 @@ def _token_digest(token: str) -> str:
     return hashlib.sha256(token.encode()).hexdigest()
 
 
+# ``ist_<row id>_<secret>``: the id names the token (and so its account, for the per-account
+# throttle) and reveals nothing secret. The old ``ist_<secret>`` form is exactly 47 characters,
+# too short to match, so the two never get confused.
+_NAMED_TOKEN = re.compile(r"ist_([1-9][0-9]{0,9})_([A-Za-z0-9_-]{43})")
+
+
 def issue_token(session: Session, user: User, label: str = "") -> str:
-    """A new bearer token for ``user``; only its hash is stored, so print it now or lose it."""
-    token = "ist_" + secrets.token_urlsafe(32)
-    session.add(ApiToken(user_id=user.id, token_sha256=_token_digest(token), label=label))
+    """A new bearer token ``ist_<id>_<secret>`` for ``user``; only its secret's hash is stored, so
+    print it now or lose it."""
+    secret = secrets.token_urlsafe(32)
+    row = ApiToken(user_id=user.id, token_sha256=_token_digest(secret), label=label)
+    session.add(row)
     session.flush()
-    return token
+    return f"ist_{row.id}_{secret}"
+
+
+def _named(token: str) -> tuple[int, str] | None:
+    """(token id, secret) of a new-format token; None for the old form or anything else."""
+    match = _NAMED_TOKEN.fullmatch(token)
+    if match is None or int(match[1]) > DB_INT_MAX:
+        return None
+    return int(match[1]), match[2]
+
+
+def token_account(session: Session, token: str) -> int | None:
+    """The id of the user whose token ``token`` names, whether or not its secret is right; None for
+    an old-format token or one naming no token (those are throttled per address only)."""
+    named = _named(token)
+    row = session.get(ApiToken, named[0]) if named else None
+    return None if row is None else row.user_id
 
 
 def user_for_token(session: Session, token: str) -> User | None:
-    row = session.scalar(select(ApiToken).where(ApiToken.token_sha256 == _token_digest(token)))
+    """The active user this bearer token (new or old format) belongs to, else None."""
+    named = _named(token)
+    if named is None:  # the old form: found by the hash of the whole token
+        row = session.scalar(select(ApiToken).where(ApiToken.token_sha256 == _token_digest(token)))
+    else:
+        row = session.get(ApiToken, named[0])
+        if row is not None and not hmac.compare_digest(row.token_sha256, _token_digest(named[1])):
+            row = None
     if row is None or not row.user.active:
         return None
     now = utcnow()

@@ -10,9 +10,6 @@ model's (see ``response_kb_p50``), so its HTTP figure is an upper bound.
 
 from __future__ import annotations
 
-import socket
-import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -30,14 +27,9 @@ from dataset.services import segmentation
 from dataset.services import users as user_service
 from dataset.synthetic import write_synthetic_dataset
 from webapp.benchmarks.segment import default_sam2_dir, person_click
+from webapp.benchmarks.served import served_app
 from webapp.benchmarks.workspace import approved_frame_workspace
 from webapp.runtime import Runtime
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _workspace(root: Path, scene: Path, **settings: Any) -> tuple[Runtime, int, str]:
@@ -57,61 +49,39 @@ def _bench_backend(rt: Runtime, frame_id: int, token: str, truths: list[np.ndarr
     segmenter = segmentation.settings_segmenter(rt.settings)
     embedding = Embedding.from_bytes(segmentation.embedding_cache(rt.settings).get(frame.content_sha256, segmenter.model_id))
 
-    port = _free_port()
-    # The server runs in its own process, as in production, so client and server don't share a GIL.
-    server = subprocess.Popen([sys.executable, "-m", "webapp.cli", "--data-dir", str(rt.settings.home), "serve",
-                               "--port", str(port)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     http, local, response_bytes = [], [], []
-    try:
-        with httpx.Client(base_url=f"http://127.0.0.1:{port}", headers={"Authorization": f"Bearer {token}"},
-                          timeout=120) as client:
-            _wait_until_up(client, server)
-            # Untimed: the server loads the segmenter and the embedding once, as for an annotator's first click.
-            client.post(f"/api/v1/frames/{frame_id}/segment", json={"points": [[1.0, 1.0]], "labels": [1]})
-            session = 0
-            while len(http) < clicks:  # sessions of up to 3 clicks per illusion, as a careful annotator works
-                truth, points, labels, mask = truths[session % len(truths)], [], [], None
-                session += 1
-                for _ in range(3):
-                    click = person_click(truth, mask)
-                    if click is None or len(http) >= clicks:
-                        break
-                    points.append([click[0], click[1]])
-                    labels.append(click[2])
-                    body: dict[str, Any] = {"points": points, "labels": labels, "region_kind": "illusion"}
-                    if mask is not None:
-                        body["prev_mask"] = mask_to_rle(mask)
-                    start = time.perf_counter()
-                    response = client.post(f"/api/v1/frames/{frame_id}/segment", json=body)
-                    http.append((time.perf_counter() - start) * 1000)
-                    response.raise_for_status()
-                    response_bytes.append(len(response.content))
-                    if not response.json()["embedding_cached"]:
-                        raise RuntimeError("the embedding was not cached: the benchmark would time the encoder")
-                    start = time.perf_counter()
-                    segmenter.predict(embedding, np.array(points), np.array(labels), prev_mask=mask)
-                    local.append((time.perf_counter() - start) * 1000)
-                    mask = rle_to_mask(response.json()["mask"])
-    finally:
-        server.terminate()
-        server.wait(timeout=30)
+    # The server runs in its own process, as in production, so client and server don't share a GIL.
+    with served_app(rt.settings.home) as base_url, httpx.Client(
+            base_url=base_url, headers={"Authorization": f"Bearer {token}"}, timeout=120) as client:
+        # Untimed: the server loads the segmenter and the embedding once, as for an annotator's first click.
+        client.post(f"/api/v1/frames/{frame_id}/segment", json={"points": [[1.0, 1.0]], "labels": [1]})
+        session = 0
+        while len(http) < clicks:  # sessions of up to 3 clicks per illusion, as a careful annotator works
+            truth, points, labels, mask = truths[session % len(truths)], [], [], None
+            session += 1
+            for _ in range(3):
+                click = person_click(truth, mask)
+                if click is None or len(http) >= clicks:
+                    break
+                points.append([click[0], click[1]])
+                labels.append(click[2])
+                body: dict[str, Any] = {"points": points, "labels": labels, "region_kind": "illusion"}
+                if mask is not None:
+                    body["prev_mask"] = mask_to_rle(mask)
+                start = time.perf_counter()
+                response = client.post(f"/api/v1/frames/{frame_id}/segment", json=body)
+                http.append((time.perf_counter() - start) * 1000)
+                response.raise_for_status()
+                response_bytes.append(len(response.content))
+                if not response.json()["embedding_cached"]:
+                    raise RuntimeError("the embedding was not cached: the benchmark would time the encoder")
+                start = time.perf_counter()
+                segmenter.predict(embedding, np.array(points), np.array(labels), prev_mask=mask)
+                local.append((time.perf_counter() - start) * 1000)
+                mask = rle_to_mask(response.json()["mask"])
     return {"http_p50_ms": round(float(np.percentile(http, 50)), 1), "http_p95_ms": round(float(np.percentile(http, 95)), 1),
             "in_process_p50_ms": round(float(np.percentile(local, 50)), 1), "encode_ms": round(encode_ms, 1),
             "response_kb_p50": round(float(np.percentile(response_bytes, 50)) / 1024, 1), "clicks": len(http)}
-
-
-def _wait_until_up(client: httpx.Client, server: subprocess.Popen[bytes]) -> None:
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        if server.poll() is not None:
-            raise RuntimeError("the benchmark server exited early")
-        try:
-            if client.get("/healthz").status_code == 200:
-                return
-        except httpx.TransportError:
-            pass
-        time.sleep(0.1)
-    raise RuntimeError("the benchmark server did not come up in 60 s")
 
 
 def run_click_bench(clicks: int = 30, size: tuple[int, int] = (1920, 1080), sam2: bool = True) -> dict[str, Any]:

@@ -14,8 +14,6 @@ from __future__ import annotations
 
 import json
 import random
-import subprocess
-import sys
 import tempfile
 import time
 from collections.abc import Iterator, Sequence
@@ -34,8 +32,8 @@ from dataset.models import User
 from dataset.services import jobs as job_service
 from dataset.services import users as user_service
 from dataset.services.prefilter import launch_prefilter
-from dataset.settings import SETTINGS_FILE
-from webapp.benchmarks.click import _free_port, _wait_until_up
+from dataset.settings import write_settings_file
+from webapp.benchmarks.served import served_app
 
 FRAMES_PER_VIDEO = 1000
 CHUNK_VIDEOS = 20  # videos generated and inserted per round trip
@@ -92,7 +90,7 @@ def _measure(home: Path, url: str, n: int, repeats: int) -> dict[str, Any]:
     sessions = make_session_factory(engine)
     with transaction(sessions) as s:
         tokens = {role: user_service.issue_token(s, s.get(User, uid)) for role, uid in seeded["users"].items()}
-    (home / SETTINGS_FILE).write_text(f"database_url = {json.dumps(url)}\n", encoding="utf-8")
+    write_settings_file(home, database_url=url)
     routes = _time_routes(home, tokens, seeded, repeats)
     claim = _time_claim(sessions)
     engine.dispose()
@@ -257,33 +255,28 @@ def _routes(client: httpx.Client, seeded: dict[str, Any]) -> dict[str, tuple[str
 
 
 def _time_routes(home: Path, tokens: dict[str, str], seeded: dict[str, Any], repeats: int) -> dict[str, Any]:
-    port = _free_port()
-    server = subprocess.Popen([sys.executable, "-m", "webapp.cli", "--data-dir", str(home), "serve", "--port", str(port)],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    clients = {role: httpx.Client(base_url=f"http://127.0.0.1:{port}", headers={"Authorization": f"Bearer {token}"},
-                                  timeout=600) for role, token in tokens.items()}
     out: dict[str, Any] = {}
-    try:
-        _wait_until_up(clients["curator"], server)
-        for label, (method, path, role) in _routes(clients["curator"], seeded).items():
-            client, times = clients[role], []
-            for attempt in range(repeats + 1):  # the first call is untimed: it warms the server's caches
-                start = time.perf_counter()
-                response = client.request(method, path)
-                elapsed = (time.perf_counter() - start) * 1000
-                if response.status_code != 200:
-                    raise RuntimeError(f"{label}: HTTP {response.status_code}: {response.text[:200]}")
-                if attempt:
-                    times.append(elapsed)
-                if label.startswith("POST /api/v1/queue"):  # give it back, so each call searches the queue
-                    client.post(f"/api/v1/frames/{response.json()['frame_id']}/lease/release")
-            out[label] = {"p50_ms": round(float(np.percentile(times, 50)), 1),
-                          "p95_ms": round(float(np.percentile(times, 95)), 1)}
-    finally:
-        for client in clients.values():
-            client.close()
-        server.terminate()
-        server.wait(timeout=30)
+    with served_app(home) as base_url:
+        clients = {role: httpx.Client(base_url=base_url, headers={"Authorization": f"Bearer {token}"}, timeout=600)
+                   for role, token in tokens.items()}
+        try:
+            for label, (method, path, role) in _routes(clients["curator"], seeded).items():
+                client, times = clients[role], []
+                for attempt in range(repeats + 1):  # the first call is untimed: it warms the server's caches
+                    start = time.perf_counter()
+                    response = client.request(method, path)
+                    elapsed = (time.perf_counter() - start) * 1000
+                    if response.status_code != 200:
+                        raise RuntimeError(f"{label}: HTTP {response.status_code}: {response.text[:200]}")
+                    if attempt:
+                        times.append(elapsed)
+                    if label.startswith("POST /api/v1/queue"):  # give it back, so each call searches the queue
+                        client.post(f"/api/v1/frames/{response.json()['frame_id']}/lease/release")
+                out[label] = {"p50_ms": round(float(np.percentile(times, 50)), 1),
+                              "p95_ms": round(float(np.percentile(times, 95)), 1)}
+        finally:
+            for client in clients.values():
+                client.close()
     return out
 
 

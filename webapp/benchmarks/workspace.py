@@ -1,7 +1,8 @@
-"""Scratch workspaces for benchmarks: one approved frame of a synthetic scene, or accepted samples."""
+"""Scratch workspaces for benchmarks: ingested synthetic scenes, with their frames approved or their samples accepted."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -14,20 +15,29 @@ from dataset.services import users as user_service
 from dataset.services.demo import seed_reviews_and_annotations
 from dataset.services.ingest import ingest_params
 from dataset.services.sample_review import review_sample
-from dataset.settings import load_settings
+from dataset.settings import load_settings, write_settings_file
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime
 
 
-def approved_frame_workspace(home: Path, scene: Path, **settings: Any) -> tuple[Runtime, int, int]:
-    """A workspace in ``home`` with ``scene`` ingested (as the real job does) and its first frame
-    approved, plus an annotator named ``bench``; returns (runtime, frame id, user id)."""
+def ingested_workspace(home: Path, scenes: Sequence[Path], **settings: Any) -> Runtime:
+    """A workspace in ``home`` with ``scenes`` ingested (as the real job does); ``settings`` go into its
+    settings file, so the servers and workers started on it use them too."""
     home.mkdir(parents=True)
-    rt = Runtime(load_settings(home, **settings))
+    write_settings_file(home, **settings)
+    rt = Runtime(load_settings(home))
     migrate(rt.settings.database_url)
     with transaction(rt.sessions) as s:
-        rt.submit(s, "ingest", ingest_params(str(scene), fps=None, dedup_hamming=None), None)
+        for scene in scenes:
+            rt.submit(s, "ingest", ingest_params(str(scene), fps=None, dedup_hamming=None), None)
     job_service.run_queued_jobs(HANDLERS, rt)
+    return rt
+
+
+def approved_frame_workspace(home: Path, scene: Path, **settings: Any) -> tuple[Runtime, int, int]:
+    """An :func:`ingested_workspace` of ``scene`` with every frame approved, plus an annotator named
+    ``bench``; returns (runtime, first frame's id, user id)."""
+    rt = ingested_workspace(home, [scene], **settings)
     with transaction(rt.sessions) as s:
         s.execute(update(Frame).values(state=FrameState.approved))
         frame_id = s.scalar(select(Frame.id).order_by(Frame.index))
@@ -36,15 +46,9 @@ def approved_frame_workspace(home: Path, scene: Path, **settings: Any) -> tuple[
 
 
 def accepted_samples_workspace(home: Path, scenes: list[Path]) -> Runtime:
-    """A workspace in ``home`` with ``scenes`` ingested, the demo's head start of reviews and
+    """An :func:`ingested_workspace` of ``scenes`` with the demo's head start of reviews and
     annotations, their samples generated and accepted by a curator (as the real jobs do)."""
-    home.mkdir(parents=True)
-    rt = Runtime(load_settings(home))
-    migrate(rt.settings.database_url)
-    with transaction(rt.sessions) as s:
-        for scene in scenes:
-            rt.submit(s, "ingest", ingest_params(str(scene), fps=None, dedup_hamming=None), None)
-    job_service.run_queued_jobs(HANDLERS, rt)
+    rt = ingested_workspace(home, scenes)
     with transaction(rt.sessions) as s:
         s.execute(update(Frame).values(state=FrameState.prefiltered))
         curator = user_service.create_user(s, "bench-curator", "curator", "bench-password")

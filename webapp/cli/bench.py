@@ -83,6 +83,38 @@ def scale_benchmark(as_json: bool, frames: int, database_url: str | None, repeat
                        f"   (at {figures['tenth']['frames']}: p50 {small['p50_ms']} ms, p95 {small['p95_ms']} ms)")
 
 
+@bench.command("load")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@click.option("--annotators", type=click.IntRange(min=0, max=64), default=4, show_default=True)
+@click.option("--curators", type=click.IntRange(min=0, max=64), default=2, show_default=True)
+@click.option("--seconds", type=click.FloatRange(min=1, max=3600), default=30, show_default=True,
+              help="How long the clients work.")
+@click.option("--frames", type=click.IntRange(min=2, max=2000), default=40, show_default=True,
+              help="Frames of the synthetic video (half approved, half awaiting review).")
+@click.option("--database-url", default=None,
+              help="A PostgreSQL server (its database only serves to connect): the bench creates, uses and drops its "
+                   "own database bench_load. Default: SQLite in a scratch workspace.")
+@click.option("--queue-url", default=None, help="A Redis server for the job queue (redis://…). Default: the SQLite queue.")
+def load_benchmark(as_json: bool, annotators: int, curators: int, seconds: float, frames: int,
+                   database_url: str | None, queue_url: str | None) -> None:
+    """Annotators and curators at once against a served app with a worker: requests, 5xx, 409s,
+    lost writes (checked in the database afterwards) and p50/p95 per route."""
+    from webapp.benchmarks.load import run_load_bench
+
+    if annotators + curators == 0:
+        raise click.BadParameter("needs at least one annotator or curator", param_hint="--annotators/--curators")
+    results = run_load_bench(annotators=annotators, curators=curators, seconds=seconds, frames=frames,
+                             database_url=database_url, queue_url=queue_url)
+    if as_json:
+        click.echo(json.dumps(results))
+        return
+    click.echo(f"{results['database']} + {results['queue']} queue: {annotators} annotators, {curators} curators, "
+               f"{seconds:g} s: {results['requests']} requests, 5xx {results['5xx']}, lost writes "
+               f"{results['lost_writes']}, 409 {results['conflicts']}")
+    for route, times in results["routes"].items():
+        click.echo(f"  {route:44} {times['count']:>6}  p50 {times['p50_ms']:>7} ms  p95 {times['p95_ms']:>7} ms")
+
+
 @bench.command("train")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("--steps", type=click.IntRange(min=2), default=8, show_default=True, help="Timed steps per process count.")
