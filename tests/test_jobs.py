@@ -37,7 +37,8 @@ def test_worker_runs_an_import_job(rt: Runtime, start_worker, tmp_path: Path) ->
     job = wait_for(rt, job_id, lambda j: j.state.finished)
     assert job.state == JobState.succeeded, job.error
     assert job.progress == 1.0 and job.attempts == 1
-    assert job.result == {"video_id": job.result["video_id"], "frames": 6, "new_frames": 6, "dropped_duplicates": 0}
+    assert job.result == {"video_id": job.result["video_id"], "video_name": video.name, "frames": 6, "new_frames": 6,
+                          "dropped_duplicates": 0}
     assert "frame 5" in job.log
     assert frame_count(rt) == 6
 

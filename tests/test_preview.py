@@ -170,7 +170,7 @@ def test_qa_rows_mark_what_the_flags_name() -> None:
     assert rows["Disparity scale"].value == "4.66 px/unit"
     pairs = qa.pair_rows(figures)
     assert [p.flagged for p in pairs] == [False, True]
-    assert pairs[0].plane == "0.1, 0.2, 0.97, -16.4" and pairs[1].inlier_ratio == "0.31"
+    assert pairs[0].plane == "0.1, 0.2, 0.97, -16.4" and pairs[1].inlier_ratio == "31.0 %"
 
 
 # ---- scene export -----------------------------------------------------------------------------

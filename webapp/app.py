@@ -16,6 +16,7 @@ from dataset.services.errors import ServiceError
 from dataset.services.media_gc import clean_incoming
 from dataset.services.validate import DB_INT_MAX
 from dataset.settings import Settings
+from dataset.wording import plural
 from webapp.auth import init_auth, is_api_request, json_error
 from webapp.headers import init_headers
 from webapp.runtime import Runtime
@@ -51,6 +52,7 @@ def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
     # Before any route is added: ids beyond what the database stores are a 404, not a crash.
     app.url_map.converters["int"] = DatabaseInt
     app.extensions["runtime"] = rt
+    app.add_template_filter(plural)  # {{ n|plural('frame') }}: "1 frame", "2 frames"
 
     @app.before_request
     def _open_session() -> None:

@@ -33,6 +33,7 @@ from dataset.samples import mask_name, store_outputs
 from dataset.services.jobs import JobContext
 from dataset.thumbnails import put_thumbnail
 from dataset.version import code_version
+from dataset.wording import plural
 
 CAPTURE_JOB = "import_capture"
 
@@ -81,7 +82,7 @@ def import_capture_job(ctx: JobContext) -> dict[str, Any]:
             s.flush()
         video_id = video.id
         done = set(s.scalars(select(Frame.index).where(Frame.video_id == video_id)))
-    ctx.log(f"video {video_id}: {len(frames)} frames of {p['path']}; {len(done)} from an earlier attempt")
+    ctx.log(f"video {video_id}: {plural(len(frames), 'frame')} of {p['path']}; {len(done)} from an earlier attempt")
     reference = {"calibration_sha256": hashlib.sha256(calibration_bytes).hexdigest(),
                  "calibration_key": ctx.media.put_bytes(calibration_bytes, "json")}
     new = 0
@@ -100,7 +101,7 @@ def import_capture_job(ctx: JobContext) -> dict[str, Any]:
     with transaction(ctx.sessions) as s:
         video = s.get(Video, video_id)
         video.meta = {**video.meta, "capture": "complete"}
-    ctx.log(f"imported {len(frames)} frames ({new} new)")
+    ctx.log(f"imported {plural(len(frames), 'frame')} ({new} new)")
     return {"video_id": video_id, "frames": len(frames), "new_frames": new}
 
 

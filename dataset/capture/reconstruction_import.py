@@ -36,6 +36,7 @@ from dataset.models import Frame, Video
 from dataset.samples import store_outputs
 from dataset.services.errors import NotFound
 from dataset.services.jobs import JobContext
+from dataset.wording import plural
 
 RECONSTRUCTION_JOB = "import_reconstruction"
 MATCH_MODES = ("index", "order")
@@ -103,7 +104,7 @@ def import_reconstruction_job(ctx: JobContext) -> dict[str, Any]:
                 frame.assets = {**frame.assets, **new}
                 frame.revision += 1
                 updated += 1
-    ctx.log(f"{updated} frames updated, {len(items) - updated} already had these files")
+    ctx.log(f"{plural(updated, 'frame')} updated, {len(items) - updated} already had these files")
     return {"video_id": p["video_id"], "frames": len(items), "updated": updated, "unchanged": len(items) - updated}
 
 

@@ -19,6 +19,7 @@ from dataset.export.selection import DEFAULT_STATES, parse_states, select_sample
 from dataset.export.splits import DEFAULT_SPLIT, format_split_spec, parse_split_spec
 from dataset.export.staging import check_target, staged_dir
 from dataset.services.jobs import Handler, JobContext
+from dataset.wording import plural
 
 FORMATS = ("native", "authors")
 
@@ -63,7 +64,7 @@ def export_job(ctx: JobContext) -> dict[str, Any]:
     if not records:
         raise LayoutError(f"no samples to export: none is {' or '.join(p['states'])}"
                           + (f" in videos {p['video_ids']}" if p["video_ids"] else ""))
-    ctx.log(f"exporting {len(records)} samples as {p['format']} to {p['out']}")
+    ctx.log(f"exporting {plural(len(records), 'sample')} as {p['format']} to {p['out']}")
     progress = _progress(ctx, 0.0, 0.95, "exported")
     with staged_dir(Path(p["out"]), tag=f"job{ctx.job_id}", overwrite=p["overwrite"]) as root:
         if p["format"] == "native":
@@ -80,7 +81,7 @@ def import_job(ctx: JobContext) -> dict[str, Any]:
     p = ctx.params
     read = read_native if p["format"] == "native" else read_authors
     pending = read(Path(p["path"]), _progress(ctx, 0.0, 0.3, "checked"))
-    ctx.log(f"{p['path']}: {len(pending)} samples, layout valid")
+    ctx.log(f"{p['path']}: {plural(len(pending), 'sample')}, layout valid")
     outcomes: Counter[str] = Counter()
     progress = _progress(ctx, 0.3, 1.0, "imported")
     for done, item in enumerate(pending, start=1):

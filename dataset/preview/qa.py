@@ -72,7 +72,7 @@ def pair_rows(qa: dict[str, Any]) -> list[PairRow]:
         illusion_px=str(pair.get("illusion_px", "–")),
         support=f"{pair.get('support_px', '–')} px ({pair.get('support_source') or '–'})",
         overlap=_percent(pair.get("overlap")),
-        inlier_ratio=_number(pair.get("inlier_ratio")),
+        inlier_ratio=_percent(pair.get("inlier_ratio")),  # the share of the fitted points: read as %
         residual=_number(pair.get("residual")),
         plane=", ".join(_number(c) for c in pair.get("plane") or []) or "–",
         flagged=_flagged(flags, f"pair {pair.get('pair')} "),

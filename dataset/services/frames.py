@@ -99,7 +99,9 @@ def frames_page(session: Session, *, video_id: int | None = None, state: FrameSt
 
 def frame_json(frame: Frame, prefilter_keep: bool | None) -> dict[str, Any]:
     return {
-        "id": frame.id, "video_id": frame.video_id, "index": frame.index, "time_s": frame.time_s,
+        # The video's name is how pages label it; a page's frames share a few videos, each loaded once.
+        "id": frame.id, "video_id": frame.video_id, "video": frame.video.name, "index": frame.index,
+        "time_s": frame.time_s,
         "width": frame.width, "height": frame.height, "state": frame.state.value,
         "revision": frame.revision, "content_sha256": frame.content_sha256,
         "image": frame.media_key, "thumb": frame.assets.get("thumb"), "prefilter_keep": prefilter_keep,

@@ -23,6 +23,7 @@ from dataset.services.errors import InvalidInput
 from dataset.services.jobs import JobContext
 from dataset.services.prefilter import launch_prefilter
 from dataset.thumbnails import put_thumbnail
+from dataset.wording import plural
 
 DEFAULT_FPS = 2.0  # the paper's sampling rate
 DEFAULT_DEDUP_HAMMING = 4
@@ -82,10 +83,10 @@ def _ingest(ctx: JobContext, p: dict[str, Any]) -> dict[str, Any]:
             )
             s.add(video)
             s.flush()
-        video_id = video.id
+        video_id, video_name = video.id, video.name
         done = set(s.scalars(select(Frame.index).where(Frame.video_id == video_id)))
-    ctx.log(f"video {video_id}: {info.width}x{info.height} at {info.fps:g} fps, {info.frame_count} frames; "
-            f"sampling at {p['fps'] or 'all'} fps; {len(done)} frames from an earlier attempt")
+    ctx.log(f"video {video_id}: {info.width}x{info.height} at {info.fps:g} fps, {plural(info.frame_count, 'frame')}; "
+            f"sampling at {p['fps'] or 'all'} fps; {plural(len(done), 'frame')} from an earlier attempt")
 
     kept = new = dropped = 0
     last: int | None = None
@@ -112,8 +113,10 @@ def _ingest(ctx: JobContext, p: dict[str, Any]) -> dict[str, Any]:
         video = s.get(Video, video_id)
         video.meta = {**video.meta, "ingest": "complete", "frames": kept, "dropped_duplicates": dropped}
         jobs = launch_prefilter(s, ctx.env.submit, None, video_id=video_id) if p.get("prefilter") else []
-    ctx.log(f"kept {kept} frames ({new} new), dropped {dropped} near-duplicates; queued {len(jobs)} prefilter jobs")
-    return {"video_id": video_id, "frames": kept, "new_frames": new, "dropped_duplicates": dropped}
+    ctx.log(f"kept {plural(kept, 'frame')} ({new} new), dropped {plural(dropped, 'near-duplicate')}; "
+            f"queued {plural(len(jobs), 'prefilter job')}")
+    return {"video_id": video_id, "video_name": video_name, "frames": kept, "new_frames": new,
+            "dropped_duplicates": dropped}
 
 
 def _store_frame(ctx: JobContext, video_id: int, frame: DecodedFrame, phash: int) -> None:

@@ -26,6 +26,7 @@ from dataset.services.errors import Conflict, InvalidInput
 from dataset.services.frames import update_frame
 from dataset.services.jobs import JobContext
 from dataset.settings import Settings
+from dataset.wording import plural
 
 Submit = Callable[[Session, str, dict[str, Any], User | None], Job]
 CHUNK = 32  # frames per job: small enough to spread over workers, large enough to batch the VLM
@@ -107,7 +108,7 @@ def prefilter_frames(ctx: JobContext) -> dict[str, Any]:
             Frame.id.in_(ctx.params["frame_ids"]), Frame.state == FrameState.ingested, ~answered)
             .order_by(Frame.video_id, Frame.index)).all()
     ctx.log(f"{backend.name} ({backend.model_id}, prompt {backend.prompt_version}): "
-            f"{len(todo)} of {len(ctx.params['frame_ids'])} frames to ask about")
+            f"{len(todo)} of {plural(len(ctx.params['frame_ids']), 'frame')} to ask about")
     if ctx.params.get("sparse"):
         verdicts = _sparse(ctx, backend, todo)
     else:

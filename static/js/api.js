@@ -1,4 +1,5 @@
-// Small helpers every page shares: JSON fetch with the CSRF header, and polling.
+// Small helpers every page shares: JSON fetch with the CSRF header, failures as Errors, and polling.
+import { showSessionEnded } from "./session_banner.js";
 
 const csrf = document.querySelector('meta[name="csrf-token"]')?.content ?? "";
 
@@ -10,15 +11,31 @@ export async function api(url, { method = "GET", body } = {}) {
     credentials: "same-origin",
   });
   const data = await response.json().catch(() => ({}));
-  if (!response.ok) throw new Error(data.error ?? `${response.status} ${response.statusText}`);
+  if (!response.ok) throw failure(response.status, data, response.statusText);
   return data;
 }
 
-// Call `fn` now and every `ms` while the tab is visible.
+// The Error for a failed response. Pages send no tokens, so a 401 means the session ended: the
+// page-wide notice says so, and `sessionEnded` tells the page to leave out a message of its own.
+export function failure(status, data = {}, statusText = "") {
+  const err = new Error(data.error ?? `${status} ${statusText}`);
+  if (status === 401) {
+    err.sessionEnded = true;
+    showSessionEnded();
+  }
+  return err;
+}
+
+// Call `fn` now and every `ms` while the tab is visible; stop when the session has ended.
 export function poll(fn, ms) {
   let timer;
   const tick = async () => {
-    try { await fn(); } catch (err) { console.warn(err); }
+    try {
+      await fn();
+    } catch (err) {
+      if (err.sessionEnded) return;  // nothing will load until the person logs in again
+      console.warn(err);
+    }
     timer = setTimeout(tick, document.hidden ? ms * 4 : ms);
   };
   tick();

@@ -49,7 +49,7 @@ form.addEventListener("submit", async (event) => {
     location.href = `${root.dataset.page}/${evaluation.id}`;
   } catch (err) {
     error.textContent = err.message;
-    error.hidden = false;
+    error.hidden = Boolean(err.sessionEnded);
   }
 });
 

@@ -1,42 +1,55 @@
-// A paged grid of frames with lazy-loaded images; '[' and ']' page through.
-import { api, el } from "./api.js";
+// The frames browser: a paged grid of every frame, filtered by state (and video), the filter and
+// the page kept in the address. A tile opens the frame on the Annotate page, the one page that
+// shows a single frame: editable there when its state allows, read-only otherwise.
+import { el } from "./api.js";
+import { stepOf } from "./grid.js";
+import { keyboardHelp } from "./help.js";
+import { isShortcut } from "./keys.js";
+import { framePlace } from "./labels.js";
+import { pagedList } from "./pager.js";
 
 const grid = document.getElementById("frame-grid");
 const filters = document.getElementById("frame-filters");
-const total = document.getElementById("frame-total");
-const PAGE = 60;
-let offset = 0;
-let cursor = {};  // { after } or { before }: the keyset cursor of the page to load
-let page = { prev: null, next: null };
+const ARROWS = { ArrowLeft: "left", ArrowRight: "right", ArrowUp: "up", ArrowDown: "down" };
 
-async function load() {
-  const params = new URLSearchParams({ limit: PAGE, offset, ...cursor });
-  const state = filters.elements.state.value;
-  if (state) params.set("state", state);
-  page = await api(`${grid.dataset.src}?${params}`);
-  if (!page.prev) offset = 0;
-  total.textContent = page.total ? `${offset + 1}–${offset + page.items.length} of ${page.total}` : "no frames yet";
-  grid.replaceChildren(...page.items.map((f) => el("li", { dataset: { frameId: f.id } },
-    el("img", { src: grid.dataset.media + (f.thumb ?? f.image), loading: "lazy", alt: `frame ${f.id}`, width: 240 }),
-    el("span", { className: "caption" }, `video ${f.video_id} · ${f.time_s.toFixed(1)} s · ${f.state}`),
-  )));
-  document.getElementById("prev-page").disabled = !page.prev;
-  document.getElementById("next-page").disabled = !page.next;
+function tile(frame) {
+  const place = framePlace(frame);
+  return el("li", { dataset: { frameId: frame.id, state: frame.state } },
+    el("a", { href: grid.dataset.open + frame.id, title: `Open ${place}` },
+      el("img", { src: grid.dataset.media + (frame.thumb ?? frame.image), loading: "lazy", alt: `frame #${frame.id}`,
+                  width: 240 }),
+      el("span", { className: "caption" }, `${place} · `, el("span", { className: `state ${frame.state}` }, frame.state))));
 }
 
-const move = (delta) => {
-  const to = delta > 0 ? page.next : page.prev;
-  if (!to) return;
-  offset = Math.max(0, offset + delta);
-  cursor = delta > 0 ? { after: to } : { before: to };
-  load();
-};
-document.getElementById("prev-page").addEventListener("click", () => move(-PAGE));
-document.getElementById("next-page").addEventListener("click", () => move(PAGE));
-filters.elements.state.addEventListener("change", () => { offset = 0; cursor = {}; load(); });
-document.addEventListener("keydown", (event) => {
-  if (event.target.closest("input, select, textarea")) return;
-  if (event.key === "[") move(-PAGE);
-  if (event.key === "]") move(PAGE);
+function draw(page) {
+  grid.replaceChildren(...(page.items.length ? page.items.map(tile)
+    : [el("li", { className: "empty" }, "No frames here. Frames appear when videos are ingested (see Ingest and Jobs).")]));
+}
+
+const { refresh } = pagedList({ src: grid.dataset.src, form: filters, size: 60, draw,
+                                range: document.getElementById("frame-total"),
+                                status: document.getElementById("frame-status") });
+
+// The video filter comes from a link (a job's "Made" column): ✕ drops it.
+document.querySelector("#video-filter button")?.addEventListener("click", (event) => {
+  filters.elements.video_id.value = "";
+  event.target.closest("#video-filter").remove();
+  filters.dispatchEvent(new Event("change"));
 });
-load();
+
+// Arrow keys move between the tiles once one has the focus (Tab); Enter opens it, as links do.
+document.addEventListener("keydown", (event) => {
+  const tiles = [...grid.querySelectorAll("a")];
+  const at = tiles.indexOf(document.activeElement);
+  if (!(event.key in ARROWS) || at < 0 || !isShortcut(event)) return;
+  event.preventDefault();
+  tiles[Math.min(tiles.length - 1, Math.max(0, at + stepOf(ARROWS[event.key], grid)))].focus();
+});
+
+keyboardHelp([
+  ["`]` or `n`", "next page"],
+  ["`[` or `p`", "previous page"],
+  ["`Tab`, then `←` `→` `↑` `↓`", "move between the frames"],
+  ["`Enter`", "open the frame on the Annotate page (read-only unless approved or annotated)"],
+], { note: "The filter and the page are in the address: a reload or a shared link shows the same frames." });
+refresh();

@@ -1,6 +1,6 @@
 // Uploads videos one by one with a byte progress bar (XHR: fetch has no upload progress),
 // then follows each ingest job's progress until it finishes.
-import { api, el, poll } from "./api.js";
+import { api, el, failure, poll } from "./api.js";
 import { summary } from "./job_summary.js";
 
 const form = document.getElementById("upload");
@@ -19,7 +19,7 @@ function upload(file, fields, onProgress) {
     xhr.upload.onprogress = (e) => e.lengthComputable && onProgress(e.loaded / e.total);
     xhr.onload = () => {
       const data = JSON.parse(xhr.responseText || "{}");
-      xhr.status < 300 ? resolve(data) : reject(new Error(data.error ?? `${xhr.status} ${xhr.statusText}`));
+      xhr.status < 300 ? resolve(data) : reject(failure(xhr.status, data, xhr.statusText));
     };
     xhr.onerror = () => reject(new Error("network error during upload"));
     xhr.send(body);
@@ -77,7 +77,7 @@ async function uploadAll() {
       row.querySelector("progress").value = 0;
       follow(job, row);
     } catch (err) {
-      row.querySelector(".status").textContent = err.message;
+      row.querySelector(".status").textContent = err.sessionEnded ? "not uploaded" : err.message;
       row.classList.add("failed");
     }
   }

@@ -27,8 +27,10 @@ const stop = poll(async () => {
   try {
     job = await api(root.dataset.src);
   } catch (err) {
-    $("job-summary").textContent = err.message;  // e.g. "no job 7" (or one this user may not see)
-    $("job-summary").classList.add("error");
+    if (!err.sessionEnded) {
+      $("job-summary").textContent = err.message;  // e.g. "no job 7" (or one this user may not see)
+      $("job-summary").classList.add("error");
+    }
     throw err;
   }
   $("job-kind").textContent = `· ${job.kind}`;

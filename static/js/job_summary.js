@@ -1,7 +1,6 @@
 // What a job did and made, in words and links: shared by the jobs table and a job's own page.
 import { el } from "./api.js";
-
-const plural = (n, word) => `${n} ${word}${n === 1 ? "" : "s"}`;
+import { plural } from "./labels.js";
 
 // One short line for a finished job's result.
 export function summary(job) {
@@ -26,8 +25,9 @@ export function madeLinks(job, { canReview }) {
   const links = [];
   const videoId = r.video_id ?? p.video_id;
   if (videoId != null) {
-    links.push(canReview ? el("a", { href: `/review?video_id=${videoId}` }, `video ${videoId}`)
-                         : el("a", { href: `/frames?video_id=${videoId}` }, `video ${videoId}`));
+    // Named as the other pages name it when the job knows the name (ingest does).
+    const label = r.video_name ?? `video #${videoId}`;
+    links.push(el("a", { href: `${canReview ? "/review" : "/frames"}?video_id=${videoId}` }, label));
   }
   if (p.frame_id != null) links.push(el("a", { href: `/annotate/${p.frame_id}` }, `frame #${p.frame_id}`));
   for (const id of Array.isArray(r.frames) ? r.frames : []) links.push(el("a", { href: `/annotate/${id}` }, `frame #${id}`));

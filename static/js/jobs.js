@@ -1,14 +1,19 @@
-// The jobs table, refreshed every two seconds: each job links to its own page; failed ones can be retried.
+// The jobs table, a page of it refreshed every two seconds: each job links to its own page; failed
+// ones can be retried. The state filter and the page are kept in the address.
 import { api, el, poll } from "./api.js";
+import { keyboardHelp } from "./help.js";
 import { joined, madeLinks, summary } from "./job_summary.js";
+import { pagedList } from "./pager.js";
 
 const table = document.getElementById("jobs");
+const filters = document.getElementById("job-filters");
+const status = document.getElementById("jobs-status");
 const canRetry = table.dataset.canRetry === "true";
 const canReview = table.dataset.canReview === "true";
 
 function row(job) {
   const retry = canRetry && (job.state === "failed" || job.state === "interrupted")
-    ? el("button", { type: "button", className: "ghost small", onclick: () => api(`${table.dataset.src}/${job.id}/retry`, { method: "POST" }).then(refresh) }, "Retry")
+    ? el("button", { type: "button", className: "ghost small", onclick: () => retryJob(job) }, "Retry")
     : "";
   const failed = job.state === "failed" || job.state === "interrupted";
   return el("tr", { dataset: { jobId: job.id, state: job.state } },
@@ -20,9 +25,23 @@ function row(job) {
     el("td", { className: "made" }, ...joined(madeLinks(job, { canReview }))));
 }
 
-async function refresh() {
-  const { items } = await api(table.dataset.src);
-  table.tBodies[0].replaceChildren(...(items.length ? items.map(row) : [el("tr", {}, el("td", { colSpan: 8 }, "No jobs yet."))]));
+function draw({ items }) {
+  const none = filters.elements.state.value ? `No ${filters.elements.state.value} jobs here.` : "No jobs yet.";
+  table.tBodies[0].replaceChildren(...(items.length ? items.map(row) : [el("tr", {}, el("td", { colSpan: 8 }, none))]));
 }
 
-poll(refresh, 2000);
+const { load } = pagedList({ src: table.dataset.src, form: filters, size: 50, draw,
+                             range: document.getElementById("jobs-range"), status });
+
+async function retryJob(job) {
+  try {
+    await api(`${table.dataset.src}/${job.id}/retry`, { method: "POST" });
+    await load();
+  } catch (err) {
+    if (!err.sessionEnded) status.textContent = `Job #${job.id} was not retried: ${err.message}`;
+  }
+}
+
+keyboardHelp([["`]` or `n`", "next page (older jobs)"], ["`[` or `p`", "previous page (newer jobs)"]],
+             { note: "The state filter and the page are in the address: a reload or a shared link shows the same jobs." });
+poll(load, 2000);

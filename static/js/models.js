@@ -66,7 +66,7 @@ if (form) {
       location.href = runUrl(root.dataset.runPage, run.run);
     } catch (err) {
       error.textContent = err.message;
-      error.hidden = false;
+      error.hidden = Boolean(err.sessionEnded);
       button.disabled = false;
     }
   });

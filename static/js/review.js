@@ -2,23 +2,26 @@
 // an undo stack and a large view. Decisions run one after another, in the order the keys were
 // pressed, so each sends the revision the previous one returned and undo undoes what it says.
 import { api, el, poll } from "./api.js";
-import { focusTile as focusGridTile, pageOffset, serial, setCursor, stepOf } from "./grid.js";
+import { reasonPicker } from "./dialogs.js";
+import { actLikeKeys, focusTile as focusGridTile, listenKeys, serial, setCursor, stepOf, turnPage } from "./grid.js";
+import { plural } from "./labels.js";
+import { call } from "./request.js";
+import { frameTile } from "./review_tile.js";
+import * as largeView from "./review_viewer.js";
+import { sayFailure, sessionEnded } from "./session_ended.js";
 
 const $ = (id) => document.getElementById(id);
 const root = $("review");
 const grid = $("review-grid");
 const filters = $("review-filters");
-const reasonPicker = $("reason-picker");
+const picker = $("reason-picker");
+const pickReason = reasonPicker(picker);
 const viewer = $("viewer");
 const help = $("help");
 const media = root.dataset.media;
-const csrf = document.querySelector('meta[name="csrf-token"]')?.content ?? "";
 
 const PAGE = 48;
 const EMPTY_RECHECK_MS = 5000;  // the queue fills while the prefilter runs: look again while it is empty
-const MARK = { yes: "✓", no: "✗", unknown: "?" };
-const STEPS = { ArrowLeft: "left", h: "left", ArrowRight: "right", l: "right", ArrowUp: "up", k: "up",
-                ArrowDown: "down", j: "down" };
 
 const view = { items: [], total: 0, offset: 0, focus: 0, anchor: null, selected: new Set(), questions: [],
                after: null, before: null, prev: null, next: null };
@@ -29,7 +32,7 @@ let recheck;
 
 // ---- data -------------------------------------------------------------------------------------
 
-const enqueue = serial((err) => say(err.message, "error"));
+const enqueue = serial(sayFailure(say));
 
 function query() {
   const f = filters.elements;
@@ -81,15 +84,12 @@ async function send(frames, decision, reason) {
     return (await api(root.dataset.bulk, { method: "POST", body })).results;
   }
   const [frame] = frames;
-  // Not api(): it drops an error's body, and a 409 carries the frame's current state for its tile.
-  const response = await fetch(`${root.dataset.reviewBase}${frame.id}/review`, {
-    method: "POST", credentials: "same-origin",
-    headers: { "Accept": "application/json", "Content-Type": "application/json", "X-CSRFToken": csrf },
-    body: JSON.stringify({ decision, reason, revision: frame.revision }),
-  });
-  const data = await response.json().catch(() => ({}));
-  return [response.ok ? { id: frame.id, status: 200, frame: data }
-                      : { id: frame.id, status: response.status, frame: data.frame, error: data.error ?? response.statusText }];
+  // Not api(): a 409 carries the frame's current state for its tile.
+  const res = await call(`${root.dataset.reviewBase}${frame.id}/review`,
+                         { body: { decision, reason, revision: frame.revision } });
+  if (sessionEnded(res.error)) throw res.error;
+  return [res.ok ? { id: frame.id, status: 200, frame: res.data }
+                 : { id: frame.id, status: res.status, frame: res.data.frame, error: res.error.message }];
 }
 
 // Applies results to tiles and counters; returns the ids that went through.
@@ -140,7 +140,8 @@ function targets() {
 async function decide(decision) {
   const chosen = targets();
   if (!chosen.length) return;
-  const reason = decision === "reject" ? await pickReason(chosen.length) : "";
+  const label = chosen.length > 1 ? plural(chosen.length, "frame") : "this frame";
+  const reason = decision === "reject" ? await pickReason(label) : "";
   if (decision === "reject" && !reason) return;
   const ids = chosen.map((f) => f.id);
   // Move on at once, so the curator never waits for the server between two keys.
@@ -157,7 +158,7 @@ async function decide(decision) {
         .map((f) => ({ before: f, after: latest.get(f.id), mineBefore: mineBefore.get(f.id) }));
       frames.forEach((f) => tally(f.after.id, f.after.state));
       undoStack.push({ decision, frames });
-      const what = done.size === 1 ? `#${[...done][0]}` : plural(done.size);
+      const what = done.size === 1 ? `#${[...done][0]}` : plural(done.size, "frame");
       if (done.size === ids.length) say(decision === "approve" ? `Approved ${what}.` : `Rejected ${what}: ${reason}.`);
     } finally {
       busy(ids, false);
@@ -184,20 +185,12 @@ function undo() {
       }
     }
     if (restored.length) {
-      say(`Undid ${entry.decision} of ${plural(restored.length)}.`);
+      say(`Undid ${entry.decision} of ${plural(restored.length, "frame")}.`);
       const i = indexOf(restored[0]);
       if (i >= 0) moveTo(i);
     }
     paint();
   });
-}
-
-function pickReason(count) {
-  $("reason-target").textContent = count > 1 ? `${count} frames` : "this frame";
-  reasonPicker.returnValue = "";
-  reasonPicker.showModal();
-  return new Promise((resolve) => reasonPicker.addEventListener("close", () => resolve(reasonPicker.returnValue),
-                                                                 { once: true }));
 }
 
 // ---- focus, selection, paging -----------------------------------------------------------------
@@ -237,12 +230,7 @@ function selectPage() {
 }
 
 function page(direction) {
-  enqueue(async () => {
-    const next = pageOffset(view, direction, PAGE, inFilter);
-    if (typeof next === "string") return say(next);
-    Object.assign(view, next);
-    await load();
-  });
+  enqueue(() => turnPage(view, direction, { size: PAGE, inFilter, load, say }));
 }
 
 function focusTile() {
@@ -254,11 +242,7 @@ function focusTile() {
 const inFilter = (item) => ["all", item.state].includes(filters.elements.state.value);
 const indexOf = (id) => view.items.findIndex((f) => f.id === id);
 const tileOf = (id) => grid.querySelector(`.tile[data-id="${id}"]`);
-const plural = (n) => (n === 1 ? "1 frame" : `${n} frames`);
-const answerOf = (value) => (value === true ? "yes" : value === false ? "no" : "unknown");
-const verdictOf = (keep) => (keep === true ? "keep" : keep === false ? "drop" : "no verdict");
-const formatNumber = (v) => (typeof v === "number" ? String(Number(v.toPrecision(3))) : String(v));
-const timeOf = (item) => `${item.time_s.toFixed(1)} s`;
+const shown = () => ({ media, questions: view.questions });
 
 function paint() {
   [...grid.querySelectorAll(".tile")].forEach((node, i) => {
@@ -277,81 +261,18 @@ function busy(ids, on) {
 }
 
 function renderTile(node, item) {
-  const image = node.querySelector("img") ?? el("img", {
-    src: media + item.thumb, loading: "lazy", alt: "", width: 320, height: Math.round(320 * item.height / item.width),
-  });
-  node.dataset.id = item.id;
-  node.dataset.state = item.state;
-  node.classList.toggle("settled", !inFilter(item));
-  node.ariaLabel = `Frame ${item.id}, video ${item.video_id} at ${timeOf(item)}, ${item.state}, VLM ${verdictOf(item.prefilter_keep)}`;
-  node.replaceChildren(
-    el("div", { className: "thumb" }, image,
-       el("span", { className: `badge state ${item.state}` }, item.state),
-       el("span", { className: `badge verdict ${verdictOf(item.prefilter_keep).replace(" ", "-")}`,
-                    title: item.prefilter?.reason ?? "" }, `VLM ${verdictOf(item.prefilter_keep)}`)),
-    el("div", { className: "meta" }, el("strong", {}, `#${item.id}`), ` video ${item.video_id} · ${timeOf(item)}`,
-       lastReview(item)),
-    answerChips(item.prefilter?.answers),
-    metricList(item.prefilter?.metrics ?? {}),
-  );
-  return node;
-}
-
-function lastReview(item) {
-  const last = item.last_review;
-  if (!last || item.state === "prefiltered") return "";
-  return el("span", { className: "reviewed", title: `${last.decision} by ${last.user ?? "?"} at ${last.at}` },
-            last.reason ? `${last.reason} · ${last.user ?? ""}` : last.user ?? "");
-}
-
-function answerChips(answers) {
-  return el("ol", { className: "answers" }, ...view.questions.map((question, i) => {
-    const answer = answerOf(answers?.[i]);
-    return el("li", { className: answer, title: `${i + 1}. ${question}: ${answer}` }, MARK[answer]);
-  }));
-}
-
-function metricList(metrics) {
-  return el("dl", { className: "metrics" }, ...Object.entries(metrics).map(([name, value]) =>
-    el("div", { title: name }, el("dt", {}, name.replaceAll("_", " ")), el("dd", {}, formatNumber(value)))));
+  return frameTile(node, item, { ...shown(), settled: !inFilter(item) });
 }
 
 function renderViewer() {
-  const item = view.items[view.focus];
-  const result = item.prefilter;
-  const image = $("viewer-image");
-  image.src = media + item.image;
-  image.alt = `Frame ${item.id}, full resolution`;
-  viewer.ariaLabel = `Frame ${item.id}`;
-  $("viewer-info").replaceChildren(
-    el("h2", {}, `Frame #${item.id}`, el("span", { className: `badge state ${item.state}` }, item.state)),
-    el("p", { className: "muted" }, `video ${item.video_id} · index ${item.index} · ${timeOf(item)} · ${item.width}×${item.height}`),
-    item.last_review && item.state !== "prefiltered"
-      ? el("p", {}, `${item.last_review.decision === "approve" ? "Approved" : "Rejected"}`,
-           item.last_review.reason ? ` (${item.last_review.reason})` : "", ` by ${item.last_review.user ?? "?"}`)
-      : "",
-    result ? el("p", {}, el("strong", {}, `VLM ${verdictOf(result.keep)}`), result.reason ? ` — ${result.reason}` : "")
-           : el("p", { className: "muted" }, "No VLM result yet."),
-    result ? el("p", { className: "muted" }, `${result.backend} · ${result.model_id} · prompt ${result.prompt_version}`) : "",
-    el("table", { className: "questions" }, ...view.questions.map((question, i) => {
-      const answer = answerOf(result?.answers?.[i]);
-      return el("tr", {}, el("td", { className: "n" }, `${i + 1}`), el("td", {}, question),
-                el("td", { className: `answer ${answer}` }, answer));
-    })),
-    metricList(result?.metrics ?? {}),
-    result?.raw ? el("details", {}, el("summary", {}, "Raw VLM answer"), el("pre", {}, result.raw)) : "",
-  );
+  largeView.show(viewer, view.items[view.focus], shown());
 }
 
 function openViewer() {
-  if (!view.items.length) return;
-  $("viewer-status").textContent = "";
-  renderViewer();
-  viewer.showModal();
-  viewer.focus();  // not its first button, where Enter or Space would press it
+  if (view.items.length) largeView.open(viewer, view.items[view.focus], shown());
 }
 
-// The large view is modal and hides the page's status line, so it has its own.
+// On the page's status line and the large view's.
 function say(text, kind = "info") {
   for (const line of [$("review-status"), $("viewer-status")]) {
     line.textContent = text;
@@ -361,48 +282,19 @@ function say(text, kind = "info") {
 
 // ---- input ------------------------------------------------------------------------------------
 
-const COMMANDS = {
-  a: () => decide("approve"), r: () => decide("reject"), x: () => decide("reject"), u: undo,
-  Enter: () => (viewer.open ? viewer.close() : openViewer()), " ": () => (viewer.open ? viewer.close() : openViewer()),
-  n: () => page(1), "]": () => page(1), p: () => page(-1), "[": () => page(-1),
-  Home: () => moveTo(0, false), End: () => moveTo(view.items.length - 1, false),
-  "?": () => help.showModal(),
-  Escape: () => moveTo(view.focus),  // clears the selection
-};
+const toggleViewer = () => (viewer.open ? viewer.close() : openViewer());
 
-function command(event) {
-  const key = event.key.length === 1 ? event.key.toLowerCase() : event.key;
-  if (event.ctrlKey || event.metaKey) return { a: selectPage, z: undo }[key];
-  if (event.altKey) return undefined;
-  if (STEPS[key]) return () => step(STEPS[key], event.shiftKey);
-  return COMMANDS[key];
-}
-
-document.addEventListener("keydown", (event) => {
-  if (reasonPicker.open) {
-    const reasons = [...reasonPicker.querySelectorAll("button.reason")].map((b) => b.value);
-    const reason = reasons[Number(event.key) - 1];
-    if (reason) {
-      event.preventDefault();
-      reasonPicker.close(reason);
-    }
-    return;
-  }
-  if (help.open) {
-    if (event.key === "?") help.close();
-    return;
-  }
-  const target = event.target;
-  if (target.closest("input, select, textarea")) {
-    if (event.key === "Escape") focusTile();
-    return;
-  }
-  if (["Enter", " "].includes(event.key) && target.closest("button, a, summary")) return;  // let them press
-  if (viewer.open && event.key === "Escape") return;  // the dialog closes itself
-  const run = command(event);
-  if (!run) return;
-  event.preventDefault();
-  run();
+listenKeys({
+  help, picker, focus: focusTile, step,
+  commands: {
+    a: () => decide("approve"), r: () => decide("reject"), x: () => decide("reject"), u: undo,
+    Enter: toggleViewer, " ": toggleViewer,
+    n: () => page(1), "]": () => page(1), p: () => page(-1), "[": () => page(-1),
+    Home: () => moveTo(0, false), End: () => moveTo(view.items.length - 1, false),
+    "?": () => help.showModal(),
+    Escape: () => moveTo(view.focus),  // clears the selection
+  },
+  withCtrl: { a: selectPage, z: undo },
 });
 
 grid.addEventListener("click", (event) => {
@@ -414,26 +306,14 @@ grid.addEventListener("click", (event) => {
 });
 grid.addEventListener("dblclick", (event) => event.target.closest(".tile") && openViewer());
 
-viewer.addEventListener("click", (event) => {
-  const action = event.target.closest("[data-action]")?.dataset.action;
-  const actions = { prev: () => step("left"), next: () => step("right"), approve: () => decide("approve"),
-                    reject: () => decide("reject"), close: () => viewer.close() };
-  actions[action]?.();
-  if (event.target === viewer) viewer.close();  // a click on the backdrop
-});
+largeView.listen(viewer, { prev: () => step("left"), next: () => step("right"), approve: () => decide("approve"),
+                          reject: () => decide("reject") });
 viewer.addEventListener("close", focusTile);
 help.addEventListener("close", focusTile);
 
-// Toolbar buttons act like their keys, then hand the keyboard back to the grid.
-for (const [id, run] of Object.entries({
-  "approve": () => decide("approve"), "reject": () => decide("reject"), "undo": undo, "select-page": selectPage,
-  "prev-page": () => page(-1), "next-page": () => page(1), "help-button": () => help.showModal(),
-})) {
-  $(id).addEventListener("click", async () => {
-    await run();
-    if (!help.open) focusTile();
-  });
-}
+actLikeKeys({ "approve": () => decide("approve"), "reject": () => decide("reject"), "undo": undo,
+              "select-page": selectPage, "prev-page": () => page(-1), "next-page": () => page(1),
+              "help-button": () => help.showModal() }, focusTile);
 
 filters.addEventListener("change", () => {
   filters.elements.answer.disabled = !filters.elements.question.value;

@@ -111,7 +111,7 @@ function control(id, path, body) {
       finished = false;
       await refresh();
     } catch (err) {
-      status.textContent = err.message;
+      status.textContent = err.sessionEnded ? "" : err.message;
     }
   });
 }

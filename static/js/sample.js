@@ -1,5 +1,7 @@
 // One sample's page: accept/reject (curators), and the 3D preview, viser's client playing the
 // sample's scene in a dialog, with a before/after rectification switch.
+import { keyboardHelp } from "./help.js";
+import { isShortcut } from "./keys.js";
 import { reasonPicker, review } from "./sample_review.js";
 
 const $ = (id) => document.getElementById(id);
@@ -32,7 +34,7 @@ async function decide(decision) {
     say(decision === "accept" ? "Accepted: its frame is in the dataset now."
                               : `Rejected (${reason}): the annotation went back to the annotators.`);
   } catch (err) {
-    say(err.message, "error");
+    if (!err.sessionEnded) say(err.message, "error");
   } finally {
     busy = false;
   }
@@ -79,18 +81,28 @@ const COMMANDS = { a: () => decide("accept"), r: () => decide("reject"), x: () =
                    Backspace: back };
 
 document.addEventListener("keydown", (event) => {
-  if (picker.open || event.ctrlKey || event.metaKey || event.altKey) return;
-  if (event.target.closest("input, select, textarea")) return;
   const key = event.key.length === 1 ? event.key.toLowerCase() : event.key;
-  if (viewer.open) {
-    if (key === "b") toggleStage();
-    return;
-  }
+  if (viewer.open && key === "b" && !(event.ctrlKey || event.metaKey || event.altKey)) return toggleStage();
   const run = COMMANDS[key];
-  if (!run) return;
+  if (!run || !isShortcut(event)) return;
   event.preventDefault();
   run();
 });
+
+const reasons = [...picker.querySelectorAll("button.reason")].map((b, i) => `${i + 1} ${b.value}`);
+keyboardHelp([
+  ...(root.dataset.canReview === "true" ? [
+    ["`a`", "accept the sample: its frame joins the dataset"],
+    [`\`r\` or \`x\`, then \`1\`–\`${reasons.length}\``,
+     `reject: ${reasons.join(", ")} — the frame's annotation goes back to the annotators`],
+  ] : []),
+  ...(stage ? [
+    ["`v`", "open the 3D preview"],
+    ["`b`", "in the 3D preview: before ↔ after rectification"],
+    ["`Esc`", "close the 3D preview"],
+  ] : []),
+  ["`Backspace`", "back to the samples"],
+]);
 
 $("accept")?.addEventListener("click", () => decide("accept"));
 $("reject")?.addEventListener("click", () => decide("reject"));

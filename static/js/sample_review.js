@@ -1,27 +1,12 @@
 // Accept/reject of one sample, shared by the samples grid and the sample page.
 import { api } from "./api.js";
 
+// sample.js takes the reason picker from here.
+export { reasonPicker } from "./dialogs.js";
+
 // POSTs the decision to the sample's API URL; resolves to the updated sample.
 export function review(sampleUrl, decision, reason = "") {
   return api(`${sampleUrl}/review`, { method: "POST", body: { decision, reason } });
-}
-
-// The reason picker dialog: `pick(label)` resolves to the chosen reason, or "" when cancelled.
-// Keys 1–N choose while it is open.
-export function reasonPicker(dialog) {
-  const reasons = [...dialog.querySelectorAll("button.reason")].map((b) => b.value);
-  dialog.addEventListener("keydown", (event) => {
-    const reason = reasons[Number(event.key) - 1];
-    if (!reason) return;
-    event.preventDefault();
-    dialog.close(reason);
-  });
-  return (label) => {
-    dialog.querySelector("#reason-target").textContent = label;
-    dialog.returnValue = "";
-    dialog.showModal();
-    return new Promise((resolve) => dialog.addEventListener("close", () => resolve(dialog.returnValue), { once: true }));
-  };
 }
 
 // The few QA figures a curator scans first, formatted: [[label, value, title, flagged]].

@@ -1,8 +1,10 @@
 // The samples grid: keyboard-first accept/reject of generated samples, filters, paging, and a way
 // into each sample's page and 3D preview. Decisions run one after another, in key order.
 import { api, el } from "./api.js";
-import { focusTile as focusGridTile, pageOffset, serial, setCursor, stepOf } from "./grid.js";
-import { keyFigures, reasonPicker, review } from "./sample_review.js";
+import { reasonPicker } from "./dialogs.js";
+import { actLikeKeys, focusTile as focusGridTile, listenKeys, serial, setCursor, stepOf, turnPage } from "./grid.js";
+import { keyFigures, review } from "./sample_review.js";
+import { sayFailure } from "./session_ended.js";
 
 const $ = (id) => document.getElementById(id);
 const root = $("samples");
@@ -16,8 +18,6 @@ const pages = root.dataset.pages;  // /samples
 
 const PAGE = 48;
 const THUMBS = ["masks", "disparity_after", "anaglyph"];
-const STEPS = { ArrowLeft: "left", h: "left", ArrowRight: "right", l: "right", ArrowUp: "up", k: "up",
-                ArrowDown: "down", j: "down" };
 
 const view = { items: [], total: 0, offset: 0, focus: 0, after: null, before: null, prev: null, next: null };
 // ?evaluation=ID&sort=error[&method=M&region=R]: the evaluation's samples, worst first (kept in the address).
@@ -25,7 +25,7 @@ const BY_ERROR = ["evaluation", "sort", "method", "region", "min_error"];
 const byError = new URLSearchParams([...new URLSearchParams(location.search)].filter(([k]) => BY_ERROR.includes(k)));
 const mine = new Map();  // sample id → the state this session's decisions left it in
 
-const enqueue = serial((err) => say(err.message, "error"));
+const enqueue = serial(sayFailure(say));
 
 // ---- data -------------------------------------------------------------------------------------
 
@@ -128,12 +128,7 @@ function step(direction) {
 }
 
 function page(direction) {
-  enqueue(async () => {
-    const next = pageOffset(view, direction, PAGE, inFilter);
-    if (typeof next === "string") return say(next);
-    Object.assign(view, next);
-    await load();
-  });
+  enqueue(() => turnPage(view, direction, { size: PAGE, inFilter, load, say }));
 }
 
 function open(suffix = "") {
@@ -212,32 +207,15 @@ function say(text, kind = "info") {
 
 // ---- input ------------------------------------------------------------------------------------
 
-const COMMANDS = {
-  a: () => decide("accept"), r: () => decide("reject"), x: () => decide("reject"),
-  Enter: () => open(), v: () => open("/preview"), d: cycleThumbs,
-  n: () => page(1), "]": () => page(1), p: () => page(-1), "[": () => page(-1),
-  Home: () => moveTo(0), End: () => moveTo(view.items.length - 1),
-  "?": () => help.showModal(),
-};
-
-document.addEventListener("keydown", (event) => {
-  if (picker.open) return;  // its own keys
-  if (help.open) {
-    if (event.key === "?") help.close();
-    return;
-  }
-  const target = event.target;
-  if (target.closest("input, select, textarea")) {
-    if (event.key === "Escape") focusTile();
-    return;
-  }
-  if (["Enter", " "].includes(event.key) && target.closest("button, a, summary")) return;  // let them press
-  if (event.ctrlKey || event.metaKey || event.altKey) return;
-  const key = event.key.length === 1 ? event.key.toLowerCase() : event.key;
-  const run = STEPS[key] ? () => step(STEPS[key]) : COMMANDS[key];
-  if (!run) return;
-  event.preventDefault();
-  run();
+listenKeys({
+  help, picker, focus: focusTile, step,
+  commands: {
+    a: () => decide("accept"), r: () => decide("reject"), x: () => decide("reject"),
+    Enter: () => open(), v: () => open("/preview"), d: cycleThumbs,
+    n: () => page(1), "]": () => page(1), p: () => page(-1), "[": () => page(-1),
+    Home: () => moveTo(0), End: () => moveTo(view.items.length - 1),
+    "?": () => help.showModal(),
+  },
 });
 
 grid.addEventListener("click", (event) => {
@@ -247,16 +225,9 @@ grid.addEventListener("click", (event) => {
 grid.addEventListener("dblclick", (event) => event.target.closest(".tile") && open());
 help.addEventListener("close", focusTile);
 
-// Toolbar buttons act like their keys, then hand the keyboard back to the grid.
-const BUTTONS = { "open": () => open(), "open-3d": () => open("/preview"), "accept": () => decide("accept"),
-                  "reject": () => decide("reject"), "prev-page": () => page(-1), "next-page": () => page(1),
-                  "help-button": () => help.showModal() };
-for (const [id, run] of Object.entries(BUTTONS)) {
-  $(id)?.addEventListener("click", async () => {
-    await run();
-    if (!help.open && !picker.open) focusTile();
-  });
-}
+actLikeKeys({ "open": () => open(), "open-3d": () => open("/preview"), "accept": () => decide("accept"),
+              "reject": () => decide("reject"), "prev-page": () => page(-1), "next-page": () => page(1),
+              "help-button": () => help.showModal() }, focusTile);
 
 filters.addEventListener("change", (event) => {
   if (event.target.name === "thumb") return showThumbs();

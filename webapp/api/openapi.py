@@ -182,7 +182,8 @@ def openapi_document() -> dict[str, Any]:
                             "properties": {"name": {"type": "string"}, "role": {"enum": ["annotator", "curator", "admin"]},
                                            "password": {"type": "string", "minLength": 8}}},
                 "Frame": {"type": "object", "properties": {
-                    "id": {"type": "integer"}, "video_id": {"type": "integer"}, "index": {"type": "integer"},
+                    "id": {"type": "integer"}, "video_id": {"type": "integer"},
+                    "video": {"type": "string", "description": "the video's name"}, "index": {"type": "integer"},
                     "time_s": {"type": "number", "description": "seconds into the video"},
                     "width": {"type": "integer"}, "height": {"type": "integer"}, "state": {"type": "string"},
                     "revision": {"type": "integer"}, "image": {"type": "string", "description": "media key; GET /media/{key}"},

@@ -14,6 +14,7 @@ from dataset.ingest import IngestError, find_sources
 from dataset.models import FrameState, IllusionType, Job, SourceKind
 from dataset.services.frames import list_frames
 from dataset.services.ingest import DEFAULT_DEDUP_HAMMING, DEFAULT_FPS, ingest_params
+from dataset.wording import plural
 from webapp.cli.errors import service_errors
 from webapp.cli.state import CliState, pass_state
 
@@ -75,7 +76,7 @@ def wait_for_jobs(state: CliState, job_ids: list[int], *, quiet: bool = False) -
     for job in jobs:
         click.echo(f"job {job.id}: {job.state.value} {json.dumps(job.result) if job.result else job.error or ''}", err=quiet)
     if failed:
-        raise click.ClickException(f"{len(failed)} of {len(jobs)} jobs did not succeed: "
+        raise click.ClickException(f"{len(failed)} of {plural(len(jobs), 'job')} did not succeed: "
                                    + "; ".join(f"job {j.id}: {j.error}" for j in failed))
 
 
@@ -103,7 +104,7 @@ def list_frames_cmd(state: CliState, video_id: int | None, frame_state: str | No
         keep = {True: "keep", False: "drop", None: "-"}[f["prefilter_keep"]]
         click.echo(f"{f['id']:>7} video {f['video_id']:<5} {f['time_s']:8.2f} s  {f['width']}x{f['height']}  "
                    f"{f['state']:<12} {keep}")
-    click.echo(f"{len(items)} of {total} frames", err=True)
+    click.echo(f"{len(items)} of {plural(total, 'frame')}", err=True)
 
 
 @click.command()

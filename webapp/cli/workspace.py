@@ -19,6 +19,7 @@ from dataset.services import jobs as job_service
 from dataset.services import users as user_service
 from dataset.services.ingest import ingest_params
 from dataset.settings import HOME_ENV, Settings, SettingsError, load_settings
+from dataset.wording import plural
 from webapp.cli.state import CliState, pass_state
 from webapp.runtime import Runtime
 
@@ -242,4 +243,4 @@ def _report_jobs(results: list[tuple[int, JobState]]) -> None:
     for job_id, job_state in results:
         if job_state != JobState.succeeded:
             click.echo(f"job {job_id}: {job_state.value} (see `illusion-studio jobs show {job_id}`)", err=True)
-    click.echo(f"{sum(s == JobState.succeeded for _, s in results)} of {len(results)} jobs succeeded")
+    click.echo(f"{sum(s == JobState.succeeded for _, s in results)} of {plural(len(results), 'job')} succeeded")

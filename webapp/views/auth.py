@@ -6,6 +6,7 @@ from urllib.parse import urlsplit
 
 from flask import Blueprint, current_app, flash, g, redirect, render_template, request, send_from_directory, url_for
 from flask.typing import ResponseReturnValue
+from flask_login import current_user
 from sqlalchemy import select
 
 from dataset.models import Role
@@ -36,6 +37,9 @@ def favicon() -> ResponseReturnValue:
 @public
 @limit_login
 def login() -> ResponseReturnValue:
+    if request.method == "GET" and current_user.is_authenticated:
+        # Logged in again in another tab: "log in again" links from ended sessions go straight back.
+        return redirect(_safe_next(request.args.get("next")))
     form = LoginForm()
     if form.validate_on_submit():
         user = user_service.authenticate(g.db, form.name.data, form.password.data)

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from flask import Blueprint, g, render_template
+from flask import Blueprint, g, render_template, request
 from flask.typing import ResponseReturnValue
 
-from dataset.models import Role
+from dataset.models import FrameState, Role, Video
 from dataset.services.frames import FUNNEL_STAGES, funnel_counts
+from dataset.services.validate import DB_INT_MAX
 from webapp.auth import requires
 
 bp = Blueprint("dashboard", __name__)
@@ -21,4 +22,7 @@ def dashboard() -> ResponseReturnValue:
 @bp.get("/frames")
 @requires(Role.annotator)
 def frames() -> ResponseReturnValue:
-    return render_template("frames.html")
+    """The frames browser (one video's with ?video_id=N); its script keeps filters and page in the address."""
+    video_id = request.args.get("video_id", type=int)
+    video = g.db.get(Video, video_id) if video_id and 0 < video_id <= DB_INT_MAX else None
+    return render_template("frames.html", states=list(FrameState), video=video)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from flask import Blueprint, render_template
 from flask.typing import ResponseReturnValue
 
-from dataset.models import Role
+from dataset.models import JobState, Role
 from webapp.auth import requires
 
 bp = Blueprint("jobs", __name__)
@@ -14,7 +14,7 @@ bp = Blueprint("jobs", __name__)
 @bp.get("/jobs")
 @requires(Role.annotator)
 def jobs() -> ResponseReturnValue:
-    return render_template("jobs.html")
+    return render_template("jobs.html", states=list(JobState))
 
 
 @bp.get("/jobs/<int:job_id>")

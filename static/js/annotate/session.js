@@ -1,29 +1,14 @@
 // One frame held by this annotator: its lease kept alive while the page is open, drafts saved a moment
 // after each change, and the submit. Saves go one at a time, each carrying the version the previous
 // one returned, so the server's stale-version check only ever fires for someone else's save.
+import { call } from "../request.js";
 import { toServer } from "./state.js";
 
 const SAVE_DELAY_MS = 2000;
 const RETRY_MS = 5000;
-const csrf = document.querySelector('meta[name="csrf-token"]')?.content ?? "";
-
-// Like api() from api.js, but hands back the status: a 404 or 409 here is an answer, not a failure.
-export async function call(url, { method = "POST", body, keepalive = false } = {}) {
-  try {
-    const response = await fetch(url, {
-      method, keepalive, credentials: "same-origin",
-      headers: { "Accept": "application/json", "Content-Type": "application/json", "X-CSRFToken": csrf },
-      body: body === undefined ? undefined : JSON.stringify(body),
-    });
-    const data = await response.json().catch(() => ({}));
-    return { ok: response.ok, status: response.status, data, error: data.error ?? `${response.status} ${response.statusText}` };
-  } catch (err) {
-    return { ok: false, status: 0, data: {}, error: `no connection to the server (${err.message})` };
-  }
-}
 
 export class FrameSession {
-  // hooks: saving(), saved(doc, version), conflict(message), failed(message), leaseLost(message)
+  // hooks: saving(), saved(doc, version), conflict(message), failed(error), leaseLost(message)
   constructor(api, frame, saved, hooks) {
     this.url = `${api}/frames/${frame.id}`;
     this.frame = frame;
@@ -40,7 +25,7 @@ export class FrameSession {
       const res = await call(`${this.url}/lease`);
       if (res.status === 409) {
         this.close();
-        this.hooks.leaseLost(res.error);
+        this.hooks.leaseLost(res.error.message);
       }
     }, leaseS * 1000 / 3);
   }
@@ -71,7 +56,7 @@ export class FrameSession {
     if (res.ok) return this.hooks.saved(doc, this.version);
     if (res.status === 409) {
       this.conflicted = true;
-      return this.hooks.conflict(res.error);
+      return this.hooks.conflict(res.error.message);
     }
     this.pending ??= doc;
     this.timer = setTimeout(() => this.flush(), RETRY_MS);

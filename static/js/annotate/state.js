@@ -41,10 +41,13 @@ export function removePair(doc, pairId) {
   return { ...doc, pairs: pairs.length ? pairs : emptyDoc().pairs };
 }
 
+// Whether the document holds this very region object.
+export const holds = (doc, region) => doc.pairs.some((p) => p.illusion === region || p.support === region);
+
 // Replaces one region object wherever it occurs: a mask that arrives for a click belongs to every
 // version of the document that holds that click, so undo never lands on a half-finished state.
 function swapRegion(doc, old, next) {
-  if (!doc.pairs.some((p) => p.illusion === old || p.support === old)) return doc;
+  if (!holds(doc, old)) return doc;
   return { ...doc, pairs: doc.pairs.map((p) => ({ ...p, illusion: p.illusion === old ? next : p.illusion,
                                                         support: p.support === old ? next : p.support })) };
 }

@@ -1,0 +1,97 @@
+// The side panel: region and tool switches, brush and opacity sliders, the planes with their
+// regions and types, the frame's type, and the frame's actions. Its controls act like their keys.
+import { el } from "../api.js";
+import { addPair, removePair, selectKind, selectPair, setType } from "./editing.js";
+import { checkQueue, stepFrame } from "./lifecycle.js";
+import { regionName } from "./messages.js";
+import { $, page, prefs, root, ui } from "./page.js";
+import { propagate } from "./propagate.js";
+import * as S from "./state.js";
+import { deleteFrame, submit } from "./submit.js";
+import { setBrush, setOpacity, setTool, view } from "./tools.js";
+
+export function renderPanel(doc) {
+  for (const b of document.querySelectorAll(".segmented [data-kind]")) b.setAttribute("aria-pressed", b.dataset.kind === ui.kind);
+  for (const b of document.querySelectorAll(".tools [data-tool]")) b.setAttribute("aria-pressed", b.dataset.tool === view.tool);
+  $("brush-size").value = prefs.brush;
+  $("brush-size-value").textContent = `${prefs.brush} px`;
+  $("opacity").value = prefs.opacity;
+  $("opacity-value").textContent = ui.hidden ? "hidden" : `${Math.round(prefs.opacity * 100)}%`;
+  $("illusion-type").value = doc?.type ?? "";
+  const locked = !page.session;
+  for (const id of ["add-pair", "illusion-type", "propagate", "delete"]) $(id).disabled = locked;
+  $("submit").replaceChildren(page.frame && locked ? "Next from the queue " : "Submit ", el("kbd", {}, "Enter"));
+  $("submit").disabled = !page.frame && root.dataset.state !== "empty";
+  $("pairs").replaceChildren(...(doc?.pairs ?? []).map((p, i) => pairRow(p, i + 1)));
+}
+
+// A plane's row: its number (see planeName), its two regions as chips, its own type, remove.
+function pairRow(pair, n) {
+  const chip = (kind) => {
+    const area = pair[kind]?.area ?? 0;
+    const stale = pair[kind]?.stale;
+    return el("button", {
+      type: "button", className: `chip ${kind}`, dataset: { chip: kind, done: area ? "yes" : "no" },
+      title: `${regionName(kind, pair.id)}: ${area ? `${area.toLocaleString()} px` : "none yet"}`,
+      ariaPressed: String(pair.id === ui.pair && kind === ui.kind),
+    }, el("span", { className: "mark" }, stale ? "…" : area ? "✓" : "○"), ` ${kind}`);
+  };
+  return el("li", {
+    className: "pair", dataset: { pair: pair.id }, ariaCurrent: pair.id === ui.pair ? "true" : "false",
+    style: `--pair: ${S.colourOf(pair.id)}`,
+  },
+  el("span", { className: "swatch", ariaHidden: "true" }),
+  el("span", { className: "name" }, `Plane ${n}`, n <= 9 ? el("kbd", {}, String(n)) : ""),
+  el("span", { className: "chips" }, chip("illusion"), chip("support")),
+  pairType(pair, n),
+  el("button", { type: "button", className: "remove", title: "Remove this plane (Backspace)",
+                 ariaLabel: `Remove plane ${n}` }, "×"));
+}
+
+// The plane's own illusion type; the first option follows the frame's type.
+function pairType(pair, n) {
+  const options = [...$("illusion-type").options].filter((o) => o.value)
+    .map((o) => el("option", { value: o.value, selected: o.value === pair.type }, o.textContent));
+  return el("select", {
+    className: "pair-type", ariaLabel: `Illusion type of plane ${n}`, disabled: !page.session,
+    onclick: (event) => event.stopPropagation(),  // choosing a type is not selecting the plane
+    onchange: (event) => setType(event.target.value || null, pair.id),
+  }, el("option", { value: "", selected: !pair.type }, "frame's type"), ...options);
+}
+
+// Panel controls act like their keys, then hand the keyboard back to the canvas.
+function onClick(target, run) {
+  (typeof target === "string" ? $(target) : target).addEventListener("click", async (event) => {
+    await run(event);
+    if (!document.querySelector("dialog[open]")) $("canvas").focus({ preventScroll: true });
+  });
+}
+
+export function listenPanel() {
+  onClick("prev-frame", () => stepFrame(-1));
+  onClick("next-frame", () => stepFrame(1));
+  onClick("help-button", () => $("help").showModal());
+  onClick("add-pair", addPair);
+  onClick("propagate", propagate);
+  onClick("submit", submit);
+  onClick("delete", deleteFrame);
+  onClick("check-again", checkQueue);
+  onClick("pairs", (event) => {
+    const row = event.target.closest("[data-pair]");
+    if (!row) return;
+    const id = Number(row.dataset.pair);
+    if (event.target.closest(".remove")) {
+      selectPair(id);
+      return removePair();
+    }
+    selectPair(id, event.target.closest("[data-chip]")?.dataset.chip ?? ui.kind);
+  });
+  for (const b of document.querySelectorAll(".segmented [data-kind]")) onClick(b, () => selectKind(b.dataset.kind));
+  for (const b of document.querySelectorAll(".tools [data-tool]")) onClick(b, () => setTool(b.dataset.tool));
+  $("illusion-type").addEventListener("change", (event) => {
+    setType(event.target.value || null);
+    $("canvas").focus({ preventScroll: true });
+  });
+  $("opacity").addEventListener("input", (event) => setOpacity(Number(event.target.value)));
+  $("brush-size").addEventListener("input", (event) => setBrush(Number(event.target.value)));
+}

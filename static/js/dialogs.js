@@ -1,0 +1,31 @@
+// Modal dialogs that ask for one choice: the reject-reason picker of the review and samples pages,
+// the Annotate page's type, delete and confirm dialogs.
+
+// Opens `dialog`; resolves to the value of the button that closed it, "" when it was cancelled.
+export function choose(dialog) {
+  dialog.returnValue = "";
+  dialog.showModal();
+  return new Promise((resolve) => dialog.addEventListener("close", () => resolve(dialog.returnValue), { once: true }));
+}
+
+// While `dialog` is open, the key a button names in `data-key` chooses that button. The listener
+// captures, so it runs before the pages' shortcut handlers, which pass over a key taken here
+// (defaultPrevented) even though the dialog has closed by the time they see it.
+export function keyChoices(dialog) {
+  document.addEventListener("keydown", (event) => {
+    if (!dialog.open || event.key.length !== 1) return;
+    const button = dialog.querySelector(`button[data-key="${CSS.escape(event.key)}"]`);
+    if (!button) return;
+    event.preventDefault();
+    dialog.close(button.value);
+  }, { capture: true });
+}
+
+// The reason picker (reason_picker.html): `pick(label)` resolves to the chosen reason, "" when cancelled.
+export function reasonPicker(dialog) {
+  keyChoices(dialog);
+  return (label) => {
+    dialog.querySelector("#reason-target").textContent = label;
+    return choose(dialog);
+  };
+}

@@ -1,0 +1,24 @@
+// The one notice a page shows when its session has ended (logged out in another tab, idle, too
+// old): what happened, and a way back to this very page once logged in again.
+
+const login = document.querySelector('meta[name="login-url"]')?.content ?? "/login";
+
+// The login page, told to come back here (the login view refuses targets off this site).
+export function loginUrl() {
+  return `${login}?${new URLSearchParams({ next: location.pathname + location.search + location.hash })}`;
+}
+
+export function showSessionEnded() {
+  if (document.getElementById("session-ended")) return;  // once, however many requests fail
+  const link = document.createElement("a");
+  link.href = loginUrl();
+  link.textContent = "log in again";
+  // Pages keep their filters in the address: take the address as it is at the click.
+  link.addEventListener("click", () => { link.href = loginUrl(); });
+  const banner = document.createElement("div");
+  banner.id = "session-ended";
+  banner.className = "session-ended";
+  banner.setAttribute("role", "status");
+  banner.append("Your session ended — ", link, ".");
+  document.body.prepend(banner);
+}

@@ -1,0 +1,210 @@
+"""The list pages and the sample page in a real browser at 1366x768: the Frames pager never runs
+past the end and keeps its place in the address, tiles open their frame, every page with shortcuts
+explains them under `?`, labels agree, and an ended session says so politely and leads back."""
+
+from __future__ import annotations
+
+import json
+import re
+import urllib.parse
+from collections import Counter
+from pathlib import Path
+
+import pytest
+
+from tests.browser import login, running_demo
+
+pytestmark = pytest.mark.browser
+VIEWPORT = {"width": 1366, "height": 768}
+
+
+@pytest.fixture(scope="module")
+def demo_url(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-def]
+    with running_demo(tmp_path_factory.mktemp("demo") / "ws", videos=1) as url:
+        yield url
+
+
+def _page(browser, url: str, role: str):  # type: ignore[no-untyped-def]
+    """A page in a fresh context logged in as ``role``, and the list its script errors go to."""
+    page = browser.new_context(viewport=VIEWPORT).new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    login(page, url, role, f"{role}-demo")
+    return page, errors
+
+
+def _tile_ids(page) -> list[int]:  # type: ignore[no-untyped-def]
+    return [int(i) for i in page.locator("#frame-grid li[data-frame-id]").evaluate_all(
+        "nodes => nodes.map(n => n.dataset.frameId)")]
+
+
+def test_frames_pages_within_bounds_keeps_its_place_and_opens_frames(browser, demo_url: str, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    from playwright.sync_api import expect
+
+    page, errors = _page(browser, demo_url, "annotator")
+    every = json.loads(page.evaluate("u => fetch(u).then(r => r.text())", "/api/v1/frames?limit=500"))
+    ids, total = [f["id"] for f in every["items"]], every["total"]
+    assert total == len(ids) > 10
+
+    page.goto(demo_url + "/frames?limit=3")
+    expect(page.locator("#frame-total")).to_have_text(f"1–3 of {total}")
+    assert _tile_ids(page) == ids[:3]
+    video = every["items"][0]
+    caption = page.locator("#frame-grid .caption").first
+    expect(caption).to_contain_text(f"{video['video']} · frame #{ids[0]} · {video['time_s']:.1f} s")
+    page.screenshot(path=str(tmp_path / "frames.png"))
+
+    # Keys pressed faster than pages load: each moves one page, and the range says which.
+    for _ in range(3):
+        page.keyboard.press("]")
+    expect(page.locator("#frame-total")).to_have_text(f"10–12 of {total}")
+    assert _tile_ids(page) == ids[9:12]
+    page.keyboard.press("[")
+    expect(page.locator("#frame-total")).to_have_text(f"7–9 of {total}")
+    assert _tile_ids(page) == ids[6:9]
+    # to the last page, and once more: nothing past the end
+    n_last = total % 3 or 3
+    last = f"{total - n_last + 1}–{total} of {total}"
+    for _ in range(total // 3 + 1):
+        page.keyboard.press("n")
+    expect(page.locator("#frame-total")).to_have_text(last)
+    assert _tile_ids(page) == ids[-n_last:]
+    expect(page.locator("#next-page")).to_be_disabled()
+    page.keyboard.press("]")
+    page.wait_for_load_state("networkidle")
+    expect(page.locator("#frame-total")).to_have_text(last)
+    assert _tile_ids(page) == ids[-n_last:]
+
+    # The place is in the address: a reload shows the same frames.
+    shown = _tile_ids(page)
+    assert "after=" in page.url
+    page.reload()
+    expect(page.locator("#frame-total")).to_have_text(last)
+    assert _tile_ids(page) == shown
+
+    # A link past the end (the frames left the filter meanwhile) lands on the last frames, not on nothing.
+    for past in (f"after={every['items'][-1]['video_id']}-999999", "offset=100000"):
+        page.goto(demo_url + f"/frames?limit=3&{past}")
+        expect(page.locator("#frame-total")).to_have_text(f"{total - 2}–{total} of {total}")
+        assert _tile_ids(page) == ids[-3:]
+
+    # The filter is kept in the address too, and comes back from it.
+    state = Counter(f["state"] for f in every["items"]).most_common(1)[0][0]
+    page.goto(demo_url + "/frames")
+    page.select_option("#frame-filters select[name=state]", state)
+    expect(page).to_have_url(re.compile(rf"/frames\?state={state}$"))
+    chosen = _tile_ids(page)
+    assert len(chosen) > 1 and set(page.locator("#frame-grid li").evaluate_all(
+        "nodes => nodes.map(n => n.dataset.state)")) == {state}
+    page.reload()
+    expect(page.locator("#frame-filters select[name=state]")).to_have_value(state)
+    assert _tile_ids(page) == chosen
+
+    # A tile is a link to its frame; the keyboard reaches it too.
+    page.locator("#frame-grid a").first.focus()
+    page.keyboard.press("ArrowRight")
+    expect(page.locator("#frame-grid a").nth(1)).to_be_focused()
+    page.keyboard.press("Enter")
+    page.wait_for_url(f"{demo_url}/annotate/{chosen[1]}")
+    expect(page.locator("#frame-title")).to_contain_text(f"#{chosen[1]}")
+    assert errors == []
+
+
+def test_each_page_with_shortcuts_explains_them_under_question_mark(browser, demo_url: str, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    from playwright.sync_api import expect
+
+    page, errors = _page(browser, demo_url, "curator")
+    help_dialog = page.locator("#keys-help")
+    expected = {"/frames": ["next page", "open the frame"], "/jobs": ["next page (older jobs)"],
+                "/samples/1": ["accept the sample", "before ↔ after rectification", "back to the samples"]}
+    for path, rows in expected.items():
+        page.goto(demo_url + path)
+        page.locator("body").press("?")
+        expect(help_dialog).to_be_visible()
+        for row in rows:
+            expect(help_dialog).to_contain_text(row)
+        expect(help_dialog.locator("kbd", has_text="?")).to_have_count(1)
+        page.screenshot(path=str(tmp_path / f"help-{path.strip('/').replace('/', '-')}.png"))
+        page.keyboard.press("?")
+        expect(help_dialog).to_be_hidden()
+        page.click("[data-help]")  # the button opens it too
+        expect(help_dialog).to_be_visible()
+        page.keyboard.press("Escape")
+        expect(help_dialog).to_be_hidden()
+
+    # While the help is open, the page's own keys rest: no accept from behind the dialog.
+    page.goto(demo_url + "/samples/1")
+    state = page.locator("#sample-state").inner_text()
+    page.locator("body").press("?")
+    page.keyboard.press("a")
+    page.keyboard.press("Escape")
+    expect(page.locator("#sample-state")).to_have_text(state)
+    assert page.locator("#sample-status").inner_text() == ""
+    assert errors == []
+
+
+def test_labels_agree_and_counts_read_as_words(browser, demo_url: str) -> None:  # type: ignore[no-untyped-def]
+    from playwright.sync_api import expect
+
+    page, _ = _page(browser, demo_url, "curator")
+    sample = json.loads(page.evaluate("u => fetch(u).then(r => r.text())", "/api/v1/samples/1"))
+    page.goto(demo_url + "/samples/1")
+    head = page.locator(".sample-head p.muted")
+    expect(head).to_contain_text(f"{sample['video']} · frame #{sample['frame_id']} · {sample['time_s']:.1f} s")
+    assert "index" not in head.inner_text()
+    inliers = page.locator(".qa-pairs tbody td:nth-child(6)")
+    assert inliers.count() and all(re.fullmatch(r"\d+\.\d %|–", t) for t in inliers.all_inner_texts())
+
+    page.goto(demo_url + "/jobs")
+    page.wait_for_selector("#jobs tbody tr[data-state=succeeded]")
+    made = page.locator("#jobs tbody tr", has=page.locator("td:nth-child(2)", has_text="ingest")).last.locator(".made a")
+    expect(made.first).to_have_text(sample["video"])
+    assert not re.search(r"\b1 (frames|samples|jobs|near-duplicates|embeddings)\b", page.locator("main").inner_text())
+
+
+def test_an_ended_session_says_so_once_and_leads_back_to_the_same_place(browser, demo_url: str, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    from playwright.sync_api import expect
+
+    page, errors = _page(browser, demo_url, "curator")
+    page.goto(demo_url + "/frames?state=prefiltered")
+    expect(page.locator("#frame-grid li[data-frame-id]").first).to_be_visible()
+    jobs = page.context.new_page()
+    jobs.goto(demo_url + "/jobs")
+    sample = page.context.new_page()
+    sample.goto(demo_url + "/samples/1")
+
+    # Logged out in another tab: the server-side session is gone for every tab of this browser.
+    other = page.context.new_page()
+    other.goto(demo_url + "/")
+    other.click("button.link")
+    other.wait_for_url(demo_url + "/login")
+    other.close()
+
+    banner = page.locator("#session-ended")
+    page.select_option("#frame-filters select[name=state]", "generated")
+    expect(banner).to_have_text("Your session ended — log in again.")
+    expect(banner).to_have_attribute("role", "status")
+    expect(page.locator("#frame-status")).to_have_text("")  # no second, technical message
+    page.select_option("#frame-filters select[name=state]", "prefiltered")
+    expect(page.locator(".session-ended")).to_have_count(1)
+    assert "Bearer" not in page.locator("body").inner_text()
+    page.screenshot(path=str(tmp_path / "session-ended-frames.png"))
+
+    expect(jobs.locator("#session-ended")).to_be_visible(timeout=10_000)  # the live table's next refresh
+    sample.click("#accept")
+    expect(sample.locator("#session-ended")).to_be_visible()
+    expect(sample.locator("#sample-status")).to_have_text("")
+    sample.screenshot(path=str(tmp_path / "session-ended-sample.png"))
+
+    link = banner.get_by_role("link", name="log in again")
+    href = link.get_attribute("href")
+    assert href == "/login?" + urllib.parse.urlencode({"next": "/frames?state=prefiltered"})
+    link.click()
+    page.wait_for_url(re.compile(r"/login\?next="))
+    page.fill("input[name=name]", "curator")
+    page.fill("input[name=password]", "curator-demo")
+    page.click("button[type=submit]")
+    page.wait_for_url(demo_url + "/frames?state=prefiltered")
+    expect(page.locator("#frame-filters select[name=state]")).to_have_value("prefiltered")
+    expect(page.locator("#session-ended")).to_have_count(0)
+    assert errors == []
