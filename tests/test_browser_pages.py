@@ -33,6 +33,11 @@ def _page(browser, url: str, role: str):  # type: ignore[no-untyped-def]
     return page, errors
 
 
+def _place(item: dict, frame_id: int | None = None) -> str:
+    """Where a frame is, as every page says it (labels.js framePlace): video name, frame id, time."""
+    return f"{item['video']} · frame #{frame_id or item['id']} · {item['time_s']:.1f} s"
+
+
 def _tile_ids(page) -> list[int]:  # type: ignore[no-untyped-def]
     return [int(i) for i in page.locator("#frame-grid li[data-frame-id]").evaluate_all(
         "nodes => nodes.map(n => n.dataset.frameId)")]
@@ -49,9 +54,8 @@ def test_frames_pages_within_bounds_keeps_its_place_and_opens_frames(browser, de
     page.goto(demo_url + "/frames?limit=3")
     expect(page.locator("#frame-total")).to_have_text(f"1–3 of {total}")
     assert _tile_ids(page) == ids[:3]
-    video = every["items"][0]
     caption = page.locator("#frame-grid .caption").first
-    expect(caption).to_contain_text(f"{video['video']} · frame #{ids[0]} · {video['time_s']:.1f} s")
+    expect(caption).to_contain_text(_place(every["items"][0]))
     page.screenshot(path=str(tmp_path / "frames.png"))
 
     # Keys pressed faster than pages load: each moves one page, and the range says which.
@@ -116,7 +120,11 @@ def test_each_page_with_shortcuts_explains_them_under_question_mark(browser, dem
     page, errors = _page(browser, demo_url, "curator")
     help_dialog = page.locator("#keys-help")
     expected = {"/frames": ["next page", "open the frame"], "/jobs": ["next page (older jobs)"],
-                "/samples/1": ["accept the sample", "before ↔ after rectification", "back to the samples"]}
+                "/samples/1": ["accept the sample", "before ↔ after rectification", "back to the samples"],
+                "/review": ["first / last frame of the page", "approve the frame", "reject: 1 blurry, 2 ",
+                            "select the page", "Mouse: click focuses"],
+                "/samples": ["first / last sample of the page", "accept the sample", "reject: 1 surface not flat",
+                             "thumbnails: image + masks", "next / previous page"]}
     for path, rows in expected.items():
         page.goto(demo_url + path)
         page.locator("body").press("?")
@@ -140,26 +148,64 @@ def test_each_page_with_shortcuts_explains_them_under_question_mark(browser, dem
     page.keyboard.press("Escape")
     expect(page.locator("#sample-state")).to_have_text(state)
     assert page.locator("#sample-status").inner_text() == ""
+    # nor on a grid, whose keys are its own; closing the help gives the keyboard back to the grid
+    page.goto(demo_url + "/samples?state=all")
+    first = page.locator("#samples-grid .tile").first
+    expect(first).to_be_focused()
+    state = first.get_attribute("data-state")
+    page.keyboard.press("?")
+    expect(help_dialog).to_be_visible()
+    page.keyboard.press("a")
+    page.keyboard.press("Escape")
+    expect(help_dialog).to_be_hidden()
+    expect(first).to_be_focused()
+    expect(first).to_have_attribute("data-state", state)
+    assert page.locator("#samples-status").inner_text() == ""
     assert errors == []
 
 
 def test_labels_agree_and_counts_read_as_words(browser, demo_url: str) -> None:  # type: ignore[no-untyped-def]
     from playwright.sync_api import expect
 
-    page, _ = _page(browser, demo_url, "curator")
+    page, errors = _page(browser, demo_url, "curator")
     sample = json.loads(page.evaluate("u => fetch(u).then(r => r.text())", "/api/v1/samples/1"))
+    place = _place(sample, sample["frame_id"])
     page.goto(demo_url + "/samples/1")
     head = page.locator(".sample-head p.muted")
-    expect(head).to_contain_text(f"{sample['video']} · frame #{sample['frame_id']} · {sample['time_s']:.1f} s")
+    expect(head).to_contain_text(place)
     assert "index" not in head.inner_text()
     inliers = page.locator(".qa-pairs tbody td:nth-child(6)")
     assert inliers.count() and all(re.fullmatch(r"\d+\.\d %|–", t) for t in inliers.all_inner_texts())
+    # pairs counted from 1, as the Annotate page counts planes, whatever the stored ids (the demo's start at 0)
+    expect(page.locator(".qa-pairs tbody td:first-child")).to_have_text(
+        [str(n) for n in range(1, len(sample["qa"]["pairs"]) + 1)])
+
+    # the same frame named alike on the Samples tiles (inliers as a share, like the sample page) and on Annotate
+    page.goto(demo_url + "/samples?state=all")
+    tile = page.locator(f"#samples-grid .tile[data-id='{sample['id']}']")
+    expect(tile.locator(".meta")).to_contain_text(place)
+    expect(tile.locator(".metrics div", has=page.locator("dt", has_text="inliers")).locator("dd")).to_have_text(
+        re.compile(r"^(\d+\.\d %|–)$"))
+    page.goto(demo_url + f"/annotate/{sample['frame_id']}")
+    expect(page.locator("#frame-info")).to_contain_text(place)
+
+    # and on Review: its tiles and its large view
+    frame = json.loads(page.evaluate("u => fetch(u).then(r => r.text())", "/api/v1/review/frames?state=all&limit=1"))
+    frame = frame["items"][0]
+    page.goto(demo_url + "/review?state=all")
+    tile = page.locator("#review-grid .tile").first
+    expect(tile.locator(".meta")).to_contain_text(_place(frame))
+    expect(tile).to_have_attribute("aria-label", re.compile("^" + re.escape(_place(frame))))
+    page.keyboard.press("Enter")
+    expect(page.locator("#viewer-info p.muted").first).to_have_text(f"{_place(frame)} · {frame['width']}×{frame['height']}")
+    page.keyboard.press("Escape")
 
     page.goto(demo_url + "/jobs")
     page.wait_for_selector("#jobs tbody tr[data-state=succeeded]")
     made = page.locator("#jobs tbody tr", has=page.locator("td:nth-child(2)", has_text="ingest")).last.locator(".made a")
     expect(made.first).to_have_text(sample["video"])
     assert not re.search(r"\b1 (frames|samples|jobs|near-duplicates|embeddings)\b", page.locator("main").inner_text())
+    assert errors == []
 
 
 def test_an_ended_session_says_so_once_and_leads_back_to_the_same_place(browser, demo_url: str, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
@@ -184,6 +230,7 @@ def test_an_ended_session_says_so_once_and_leads_back_to_the_same_place(browser,
     page.select_option("#frame-filters select[name=state]", "generated")
     expect(banner).to_have_text("Your session ended — log in again.")
     expect(banner).to_have_attribute("role", "status")
+    expect(page.locator(".topbar .who")).to_have_text("signed out")  # no name of a session that is gone
     expect(page.locator("#frame-status")).to_have_text("")  # no second, technical message
     page.select_option("#frame-filters select[name=state]", "prefiltered")
     expect(page.locator(".session-ended")).to_have_count(1)

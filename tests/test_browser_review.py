@@ -33,8 +33,12 @@ def test_curator_reviews_frames_with_the_keyboard_and_the_funnel_follows(browser
         assert tile[0].locator(".answers li").count() == 12
         assert tile[0].locator(".metrics dt").count() > 0
         assert page.locator("#review-range").inner_text().startswith("1–")
+        expect(page.locator(".pager #prev-page")).to_be_disabled()  # the first page: the pager macro's buttons
 
         keys = page.keyboard
+        keys.press("p")
+        expect(page.locator("#review-status")).to_have_text("This is the first page.")
+        expect(tile[0]).to_be_focused()
         keys.press("a")
         keys.press("a")
         expect(tile[0]).to_have_attribute("data-state", "approved")
@@ -78,9 +82,10 @@ def test_curator_reviews_frames_with_the_keyboard_and_the_funnel_follows(browser
         expect(tile[3]).to_be_focused()
 
         keys.press("?")
-        expect(page.locator("#help")).to_be_visible()
+        expect(page.locator("#keys-help")).to_be_visible()
         keys.press("Escape")
-        expect(page.locator("#help")).to_be_hidden()
+        expect(page.locator("#keys-help")).to_be_hidden()
+        expect(tile[3]).to_be_focused()
 
         expect(page.locator("#count-funnel")).to_have_text(str(approved_before + 2))
         page.screenshot(path=str(tmp_path / "review.png"))

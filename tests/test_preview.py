@@ -161,7 +161,7 @@ def test_anaglyph_holes_and_outlines() -> None:
 
 def test_qa_rows_mark_what_the_flags_name() -> None:
     figures = {"scale": 4.66, "hole_fraction": 0.25, "stereo_epe": None, "stereo_bad2": 0.035, "cpu_s": 0.14,
-               "flags": ["holes 25% > 20%", "pair 1 inlier ratio 0.31 < 0.5"],
+               "flags": ["holes 25% > 20%", "pair 2 inlier ratio 0.31 < 0.5"],
                "pairs": [{"pair": 0, "status": "rectified", "inlier_ratio": 1.0, "plane": [0.1, 0.2, 0.97, -16.4]},
                          {"pair": 1, "status": "rectified", "inlier_ratio": 0.31}]}
     rows = {row.label: row for row in qa.summary_rows(figures)}
@@ -170,6 +170,7 @@ def test_qa_rows_mark_what_the_flags_name() -> None:
     assert rows["Disparity scale"].value == "4.66 px/unit"
     pairs = qa.pair_rows(figures)
     assert [p.flagged for p in pairs] == [False, True]
+    assert [p.pair for p in pairs] == [1, 2]  # for people, from 1: the stored ids start at 0 here
     assert pairs[0].plane == "0.1, 0.2, 0.97, -16.4" and pairs[1].inlier_ratio == "31.0 %"
 
 

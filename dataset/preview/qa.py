@@ -1,7 +1,8 @@
 """A sample's QA figures as rows for people: named, formatted, and marked when a flag concerns them.
 
-Generation writes flags as sentences ("holes 25% > 20%", "SGBM EPE 3.10 px > 2", "pair 0 …"); a
-row is flagged when a flag starts with the row's prefix.
+Generation writes flags as sentences ("holes 25% > 20%", "SGBM EPE 3.10 px > 2", "pair 1 …"); a
+row is flagged when a flag starts with the row's prefix. Pairs are numbered for people, from 1 in the
+order of their stored ids, as the Annotate page numbers its planes.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ class Row:
 
 @dataclass(frozen=True)
 class PairRow:
-    pair: int
+    pair: int  # its number for people, from 1 (not its stored id)
     status: str
     reason: str
     illusion_px: str
@@ -66,7 +67,7 @@ def pair_rows(qa: dict[str, Any]) -> list[PairRow]:
     """One row per illusion/support pair, flagged when a flag names its pair."""
     flags = qa.get("flags", [])
     return [PairRow(
-        pair=pair.get("pair"),
+        pair=number,
         status=pair.get("status") or "–",
         reason=pair.get("reason") or "",
         illusion_px=str(pair.get("illusion_px", "–")),
@@ -75,5 +76,5 @@ def pair_rows(qa: dict[str, Any]) -> list[PairRow]:
         inlier_ratio=_percent(pair.get("inlier_ratio")),  # the share of the fitted points: read as %
         residual=_number(pair.get("residual")),
         plane=", ".join(_number(c) for c in pair.get("plane") or []) or "–",
-        flagged=_flagged(flags, f"pair {pair.get('pair')} "),
-    ) for pair in qa.get("pairs", [])]
+        flagged=_flagged(flags, f"pair {number} "),
+    ) for number, pair in enumerate(qa.get("pairs", []), 1)]

@@ -36,7 +36,8 @@ def frame_detail(session: Session, frame_id: int, user: User | Any) -> dict[str,
     pos = ids.index(frame.id) if frame.id in ids else -1
     held = ann is not None and held_by_other(ann, user.id)
     return {
-        "id": frame.id, "video_id": frame.video_id, "index": frame.index, "time_s": frame.time_s,
+        "id": frame.id, "video_id": frame.video_id, "video": frame.video.name,
+        "index": frame.index, "time_s": frame.time_s,
         "width": frame.width, "height": frame.height, "state": frame.state.value, "revision": frame.revision,
         "image": frame.media_key, "content_sha256": frame.content_sha256,
         "annotation_version": ann.version if ann else 0,

@@ -199,11 +199,13 @@ def _qa(settings: Settings, reports: list[Any], view: Any, check: Any, pair_ids:
         flags.append(f"holes {hole_fraction:.0%} > {settings.qa_max_hole_fraction:.0%}")
     if not np.isfinite(check.epe) or check.epe > settings.qa_max_stereo_epe:
         flags.append(f"SGBM EPE {check.epe:.2f} px > {settings.qa_max_stereo_epe:g}")
-    for p in pairs:
+    # Flags are read by people: pairs counted from 1 in id order, as the Annotate page counts its planes
+    # (the stored ids, in "pair", may start at 0).
+    for number, p in enumerate(pairs, 1):
         if p["status"] != "rectified":
-            flags.append(f"pair {p['pair']} {p['status']}: {p['reason']}")
+            flags.append(f"pair {number} {p['status']}: {p['reason']}")
         elif p["inlier_ratio"] is not None and p["inlier_ratio"] < settings.qa_min_inlier_ratio:
-            flags.append(f"pair {p['pair']} inlier ratio {p['inlier_ratio']:.2f} < {settings.qa_min_inlier_ratio:g}")
+            flags.append(f"pair {number} inlier ratio {p['inlier_ratio']:.2f} < {settings.qa_min_inlier_ratio:g}")
     return _finite({"pairs": pairs, "scale": view.scale, "hole_fraction": hole_fraction, "stereo_epe": check.epe,
                     "stereo_bad2": check.bad2, "stereo_coverage": check.coverage, "flags": flags})
 

@@ -29,3 +29,10 @@ export function reasonPicker(dialog) {
     return choose(dialog);
   };
 }
+
+// The picker's line in a page's keyboard help (help.js): its keys, and the reasons by their keys.
+// `then`: what a rejection leads to, where the page has more to say.
+export function reasonShortcut(dialog, then = "") {
+  const reasons = [...dialog.querySelectorAll("button.reason")].map((b) => `${b.dataset.key} ${b.value}`);
+  return [`\`r\` or \`x\`, then \`1\`–\`${reasons.length}\``, `reject: ${reasons.join(", ")}${then}`];
+}

@@ -10,6 +10,15 @@ export function serial(onError) {
 const STEPS = { ArrowLeft: "left", h: "left", ArrowRight: "right", l: "right", ArrowUp: "up", k: "up",
                 ArrowDown: "down", j: "down" };
 
+// A grid page's keyboard help (help.js): the moves listenKeys knows and the paging keys around the
+// page's own `rows`; `noun`: what a tile shows ("frame", "sample").
+export const gridHelp = (noun, rows) => [
+  ["`←` `→` `↑` `↓` or `h` `l` `k` `j`", "move"],
+  ["`Home` `End`", `first / last ${noun} of the page`],
+  ...rows,
+  ["`n` `p` or `]` `[`", "next / previous page"],
+];
+
 // Arrow-key moves in a CSS grid: ±1 sideways, ±(tiles per row) up and down.
 export function stepOf(direction, grid, oneColumn = false) {
   const columns = oneColumn ? 1 : getComputedStyle(grid).gridTemplateColumns.split(" ").length;
@@ -43,15 +52,11 @@ export function focusTile(grid, index) {
 }
 
 // The page's shortcuts: `step(direction, shift)` for arrows and h/j/k/l, `commands[key]` for the
-// other keys, `withCtrl[key]` for Ctrl/⌘ + key. `help` is the shortcut dialog, `picker` the reason
-// picker (it has keys of its own), `focus()` gives the keyboard back to the grid.
+// other keys, `withCtrl[key]` for Ctrl/⌘ + key. `help` is the shortcut dialog (help.js) and `picker`
+// the reason picker: they have keys of their own. `focus()` gives the keyboard back to the grid.
 export function listenKeys({ help, picker, focus, step, commands, withCtrl = {} }) {
   document.addEventListener("keydown", (event) => {
-    if (event.defaultPrevented || picker.open) return;
-    if (help.open) {
-      if (event.key === "?") help.close();
-      return;
-    }
+    if (event.defaultPrevented || picker.open || help.open) return;
     const target = event.target;
     if (target.closest("input, select, textarea")) {
       if (event.key === "Escape") focus();

@@ -3,6 +3,7 @@
 // the same page. The page draws the items; this module knows where they are.
 import { api } from "./api.js";
 import { isShortcut } from "./keys.js";
+import { sayFailure } from "./session_ended.js";
 
 const KEYS = { "[": -1, p: -1, "]": 1, n: 1 };
 
@@ -61,9 +62,7 @@ export function pagedList({ src, form, size, draw, range, status }) {
     queue = run.catch(() => {});
     return run;
   }
-  const said = (run) => run.catch((err) => {
-    if (!err.sessionEnded) status.textContent = err.message;
-  });
+  const said = (run) => run.catch(sayFailure((text) => { status.textContent = text; }));
   const load = () => serially(show);
   const refresh = () => said(load());
 

@@ -2,8 +2,9 @@
 // an undo stack and a large view. Decisions run one after another, in the order the keys were
 // pressed, so each sends the revision the previous one returned and undo undoes what it says.
 import { api, el, poll } from "./api.js";
-import { reasonPicker } from "./dialogs.js";
-import { actLikeKeys, focusTile as focusGridTile, listenKeys, serial, setCursor, stepOf, turnPage } from "./grid.js";
+import { reasonPicker, reasonShortcut } from "./dialogs.js";
+import { actLikeKeys, focusTile as focusGridTile, gridHelp, listenKeys, serial, setCursor, stepOf, turnPage } from "./grid.js";
+import { keyboardHelp } from "./help.js";
 import { plural } from "./labels.js";
 import { call } from "./request.js";
 import { frameTile } from "./review_tile.js";
@@ -17,7 +18,15 @@ const filters = $("review-filters");
 const picker = $("reason-picker");
 const pickReason = reasonPicker(picker);
 const viewer = $("viewer");
-const help = $("help");
+const help = keyboardHelp(gridHelp("frame", [
+  ["`a`", "approve the frame, or every selected frame"],
+  reasonShortcut(picker),
+  ["`Shift` + move", "select a range"],
+  ["`Ctrl`/`⌘` + `A`", "select the page"],
+  ["`Esc`", "clear the selection, close a dialog"],
+  ["`u` or `Ctrl` + `Z`", "undo the last decision"],
+  ["`Enter` or `Space`", "large view, where approve, reject and the arrows work too"],
+]), { note: "Mouse: click focuses, Shift+click selects a range, Ctrl/⌘+click toggles, double-click opens the large view." });
 const media = root.dataset.media;
 
 const PAGE = 48;
@@ -291,7 +300,6 @@ listenKeys({
     Enter: toggleViewer, " ": toggleViewer,
     n: () => page(1), "]": () => page(1), p: () => page(-1), "[": () => page(-1),
     Home: () => moveTo(0, false), End: () => moveTo(view.items.length - 1, false),
-    "?": () => help.showModal(),
     Escape: () => moveTo(view.focus),  // clears the selection
   },
   withCtrl: { a: selectPage, z: undo },
@@ -312,8 +320,7 @@ viewer.addEventListener("close", focusTile);
 help.addEventListener("close", focusTile);
 
 actLikeKeys({ "approve": () => decide("approve"), "reject": () => decide("reject"), "undo": undo,
-              "select-page": selectPage, "prev-page": () => page(-1), "next-page": () => page(1),
-              "help-button": () => help.showModal() }, focusTile);
+              "select-page": selectPage, "prev-page": () => page(-1), "next-page": () => page(1) }, focusTile);
 
 filters.addEventListener("change", () => {
   filters.elements.answer.disabled = !filters.elements.question.value;

@@ -15,7 +15,6 @@ const METRICS = {
 
 export const answerOf = (value) => (value === true ? "yes" : value === false ? "no" : "unknown");
 export const verdictOf = (keep) => (keep === true ? "keep" : keep === false ? "drop" : "no verdict");
-export const timeOf = (item) => `${item.time_s.toFixed(1)} s`;
 const formatNumber = (v) => (typeof v === "number" ? String(Number(v.toPrecision(3))) : String(v));
 
 // The prefilter's measurements as a definition list; every entry's tooltip says what it measures.

@@ -1,7 +1,8 @@
 // One frame's tile in the review grid: thumbnail with its state and VLM verdict, the last review,
 // the twelve answers as chips and the prefilter's measurements.
 import { el } from "./api.js";
-import { answerOf, metricList, timeOf, verdictOf } from "./review_labels.js";
+import { framePlace } from "./labels.js";
+import { answerOf, metricList, verdictOf } from "./review_labels.js";
 
 const MARK = { yes: "✓", no: "✗", unknown: "?" };
 
@@ -13,14 +14,13 @@ export function frameTile(node, item, { media, questions, settled }) {
   node.dataset.id = item.id;
   node.dataset.state = item.state;
   node.classList.toggle("settled", settled);
-  node.ariaLabel = `Frame ${item.id}, video ${item.video_id} at ${timeOf(item)}, ${item.state}, VLM ${verdictOf(item.prefilter_keep)}`;
+  node.ariaLabel = `${framePlace(item)}, ${item.state}, VLM ${verdictOf(item.prefilter_keep)}`;
   node.replaceChildren(
     el("div", { className: "thumb" }, image,
        el("span", { className: `badge state ${item.state}` }, item.state),
        el("span", { className: `badge verdict ${verdictOf(item.prefilter_keep).replace(" ", "-")}`,
                     title: item.prefilter?.reason ?? "" }, `VLM ${verdictOf(item.prefilter_keep)}`)),
-    el("div", { className: "meta" }, el("strong", {}, `#${item.id}`), ` video ${item.video_id} · ${timeOf(item)}`,
-       lastReview(item)),
+    el("div", { className: "meta" }, framePlace(item), lastReview(item)),
     answerChips(questions, item.prefilter?.answers),
     metricList(item.prefilter?.metrics ?? {}),
   );

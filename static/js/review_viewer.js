@@ -1,7 +1,8 @@
 // The review page's large view: one frame at full resolution beside everything the prefilter said
 // about it. It is modal and hides the page's status line, so it has a status line of its own.
 import { el } from "./api.js";
-import { answerOf, metricList, timeOf, verdictOf } from "./review_labels.js";
+import { framePlace } from "./labels.js";
+import { answerOf, metricList, verdictOf } from "./review_labels.js";
 
 const $ = (id) => document.getElementById(id);
 
@@ -14,7 +15,7 @@ export function show(viewer, item, { media, questions }) {
   viewer.ariaLabel = `Frame ${item.id}`;
   $("viewer-info").replaceChildren(
     el("h2", {}, `Frame #${item.id}`, el("span", { className: `badge state ${item.state}` }, item.state)),
-    el("p", { className: "muted" }, `video ${item.video_id} · index ${item.index} · ${timeOf(item)} · ${item.width}×${item.height}`),
+    el("p", { className: "muted" }, `${framePlace(item)} · ${item.width}×${item.height}`),
     item.last_review && item.state !== "prefiltered"
       ? el("p", {}, `${item.last_review.decision === "approve" ? "Approved" : "Rejected"}`,
            item.last_review.reason ? ` (${item.last_review.reason})` : "", ` by ${item.last_review.user ?? "?"}`)

@@ -1,8 +1,10 @@
 // One sample's page: accept/reject (curators), and the 3D preview, viser's client playing the
 // sample's scene in a dialog, with a before/after rectification switch.
+import { reasonPicker } from "./dialogs.js";
 import { keyboardHelp } from "./help.js";
 import { isShortcut } from "./keys.js";
-import { reasonPicker, review } from "./sample_review.js";
+import { decisionShortcuts, review } from "./sample_review.js";
+import { sayFailure } from "./session_ended.js";
 
 const $ = (id) => document.getElementById(id);
 const root = $("sample");
@@ -34,7 +36,7 @@ async function decide(decision) {
     say(decision === "accept" ? "Accepted: its frame is in the dataset now."
                               : `Rejected (${reason}): the annotation went back to the annotators.`);
   } catch (err) {
-    if (!err.sessionEnded) say(err.message, "error");
+    sayFailure(say)(err);
   } finally {
     busy = false;
   }
@@ -89,13 +91,8 @@ document.addEventListener("keydown", (event) => {
   run();
 });
 
-const reasons = [...picker.querySelectorAll("button.reason")].map((b, i) => `${i + 1} ${b.value}`);
 keyboardHelp([
-  ...(root.dataset.canReview === "true" ? [
-    ["`a`", "accept the sample: its frame joins the dataset"],
-    [`\`r\` or \`x\`, then \`1\`–\`${reasons.length}\``,
-     `reject: ${reasons.join(", ")} — the frame's annotation goes back to the annotators`],
-  ] : []),
+  ...(root.dataset.canReview === "true" ? decisionShortcuts(picker) : []),
   ...(stage ? [
     ["`v`", "open the 3D preview"],
     ["`b`", "in the 3D preview: before ↔ after rectification"],

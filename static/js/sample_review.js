@@ -1,13 +1,17 @@
 // Accept/reject of one sample, shared by the samples grid and the sample page.
 import { api } from "./api.js";
-
-// sample.js takes the reason picker from here.
-export { reasonPicker } from "./dialogs.js";
+import { reasonShortcut } from "./dialogs.js";
 
 // POSTs the decision to the sample's API URL; resolves to the updated sample.
 export function review(sampleUrl, decision, reason = "") {
   return api(`${sampleUrl}/review`, { method: "POST", body: { decision, reason } });
 }
+
+// The keyboard help's lines for a decision (help.js), `picker` being the reason picker.
+export const decisionShortcuts = (picker) => [
+  ["`a`", "accept the sample: its frame joins the dataset"],
+  reasonShortcut(picker, " — the frame's annotation goes back to the annotators"),
+];
 
 // The few QA figures a curator scans first, formatted: [[label, value, title, flagged]].
 export function keyFigures(sample) {
@@ -20,7 +24,7 @@ export function keyFigures(sample) {
   return [
     ["holes", pct(qa.hole_fraction), "share of the right view inpainted", flagged("holes")],
     ["EPE", num(qa.stereo_epe, " px"), "SGBM end-point error on the synthesized pair", flagged("SGBM EPE")],
-    ["inliers", inliers.length ? num(Math.min(...inliers)) : "–", "lowest plane-fit inlier ratio over the pairs",
+    ["inliers", inliers.length ? pct(Math.min(...inliers)) : "–", "lowest share of plane-fit inliers over the pairs",
      flagged("pair ")],
     ["scale", num(qa.scale ?? sample.params?.scale), "px per unit of monocular disparity", false],
   ];

@@ -2,18 +2,25 @@
 // into each sample's page and 3D preview. Decisions run one after another, in key order.
 import { api, el } from "./api.js";
 import { reasonPicker } from "./dialogs.js";
-import { actLikeKeys, focusTile as focusGridTile, listenKeys, serial, setCursor, stepOf, turnPage } from "./grid.js";
-import { keyFigures, review } from "./sample_review.js";
+import { actLikeKeys, focusTile as focusGridTile, gridHelp, listenKeys, serial, setCursor, stepOf, turnPage } from "./grid.js";
+import { keyboardHelp } from "./help.js";
+import { framePlace } from "./labels.js";
+import { decisionShortcuts, keyFigures, review } from "./sample_review.js";
 import { sayFailure } from "./session_ended.js";
 
 const $ = (id) => document.getElementById(id);
 const root = $("samples");
 const grid = $("samples-grid");
 const filters = $("sample-filters");
-const help = $("help");
 const picker = $("reason-picker");
 const pickReason = reasonPicker(picker);
 const canReview = root.dataset.canReview === "true";
+const help = keyboardHelp(gridHelp("sample", [
+  ...(canReview ? decisionShortcuts(picker) : []),
+  ["`Enter`", "open the sample: 2D views and QA figures"],
+  ["`v`", "open its 3D preview"],
+  ["`d`", "thumbnails: image + masks → disparity → anaglyph"],
+]));
 const pages = root.dataset.pages;  // /samples
 
 const PAGE = 48;
@@ -171,7 +178,7 @@ function renderTile(node, sample) {
   node.dataset.state = sample.state;
   node.classList.toggle("settled", !inFilter(sample));
   node.classList.toggle("flagged", sample.flagged);
-  node.ariaLabel = `Sample ${sample.id}, ${sample.video} frame ${sample.index}, ${sample.state}`
+  node.ariaLabel = `Sample ${sample.id}, ${framePlace(sample, sample.frame_id)}, ${sample.state}`
     + (sample.flagged ? `, flagged: ${sample.qa.flags.join("; ")}` : "");
   node.replaceChildren(
     el("div", { className: "thumb" },
@@ -181,7 +188,7 @@ function renderTile(node, sample) {
        sample.flagged ? el("span", { className: "badge flagged", title: sample.qa.flags.join("\n") }, "⚑ flagged") : ""),
     el("div", { className: "meta" },
        el("a", { href: `${pages}/${sample.id}`, tabIndex: -1 }, el("strong", {}, `#${sample.id}`)),
-       ` ${sample.video} · frame ${sample.index} · ${sample.time_s.toFixed(1)} s`),
+       ` ${framePlace(sample, sample.frame_id)}`),
     el("dl", { className: "metrics" }, ...keyFigures(sample).map(([label, value, title, flagged]) =>
       el("div", { title, className: flagged ? "flagged" : "" }, el("dt", {}, label), el("dd", {}, value)))),
     sample.qa.flags?.length ? el("p", { className: "flags" }, sample.qa.flags.join(" · ")) : "",
@@ -214,7 +221,6 @@ listenKeys({
     Enter: () => open(), v: () => open("/preview"), d: cycleThumbs,
     n: () => page(1), "]": () => page(1), p: () => page(-1), "[": () => page(-1),
     Home: () => moveTo(0), End: () => moveTo(view.items.length - 1),
-    "?": () => help.showModal(),
   },
 });
 
@@ -226,8 +232,7 @@ grid.addEventListener("dblclick", (event) => event.target.closest(".tile") && op
 help.addEventListener("close", focusTile);
 
 actLikeKeys({ "open": () => open(), "open-3d": () => open("/preview"), "accept": () => decide("accept"),
-              "reject": () => decide("reject"), "prev-page": () => page(-1), "next-page": () => page(1),
-              "help-button": () => help.showModal() }, focusTile);
+              "reject": () => decide("reject"), "prev-page": () => page(-1), "next-page": () => page(1) }, focusTile);
 
 filters.addEventListener("change", (event) => {
   if (event.target.name === "thumb") return showThumbs();

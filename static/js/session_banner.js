@@ -21,4 +21,6 @@ export function showSessionEnded() {
   banner.setAttribute("role", "status");
   banner.append("Your session ended — ", link, ".");
   document.body.prepend(banner);
+  // The top bar's name and "Log out" speak of a session that is gone.
+  document.querySelector(".topbar .who")?.replaceChildren("signed out");
 }

@@ -2,7 +2,7 @@
 // read-only when it can't be) and its draft restored; the queue watched while it is empty.
 // Navigation runs one step at a time.
 import { api } from "../api.js";
-import { plural } from "../labels.js";
+import { framePlace, plural } from "../labels.js";
 import { call } from "../request.js";
 import { sayFailure, sessionEnded } from "../session_ended.js";
 import { commit } from "./editing.js";
@@ -97,8 +97,7 @@ async function open(id, how) {
   $("frame-title").textContent = `Frame #${detail.id}`;
   $("preview-link").href = `/frames/${detail.id}/preview`;
   $("preview-link").hidden = detail.state === "approved";  // a sample exists only after a submit
-  $("frame-info").textContent = `video ${detail.video_id} · frame ${detail.index} · ${detail.time_s.toFixed(1)} s · `
-    + `${detail.width}×${detail.height}`;
+  $("frame-info").textContent = `${framePlace(detail)} · ${detail.width}×${detail.height}`;
   $("prev-frame").disabled = detail.prev_id == null;
   $("next-frame").disabled = detail.next_id == null;
   $("empty").hidden = true;
