@@ -169,6 +169,16 @@ def load_settings(
         raise SettingsError(f"{source}: {where}: {err['msg']}") from None
 
 
+def drop_settings_environment() -> list[str]:
+    """Remove every ``ILLUSION_STUDIO_*`` variable from this process's environment (and so from the
+    processes it starts); returns their names. For scratch workspaces, such as the benchmarks',
+    whose settings files the environment would otherwise outrank."""
+    names = sorted(name for name in os.environ if name.startswith(ENV_PREFIX))
+    for name in names:
+        del os.environ[name]
+    return names
+
+
 def write_settings_file(home: Path, **values: Any) -> None:
     """Write ``values`` as the data dir's settings file, which every process started on ``home`` reads
     (None values are left out: TOML has no null)."""

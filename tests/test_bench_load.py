@@ -22,7 +22,9 @@ ROUTES = {"POST /api/v1/queue/annotate/next", "GET /api/v1/frames/{id}", "POST /
 
 @pytest.mark.slow
 @pytest.mark.parametrize("backend", ["sqlite", "postgresql+redis"])
-def test_bench_load_answers_no_5xx_and_loses_no_write(backend: str) -> None:
+def test_bench_load_answers_no_5xx_and_loses_no_write(backend: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    # A deployment's settings in the environment must not reach the benchmark's scratch workspace.
+    monkeypatch.setenv("ILLUSION_STUDIO_DATABASE_URL", "postgresql://nobody@127.0.0.1:1/production")
     args = ["bench", "load", "--json", "--seconds", "4", "--annotators", "1", "--curators", "1", "--frames", "8"]
     if backend != "sqlite":
         if not (TEST_DATABASE_URL and TEST_REDIS_URL):
@@ -30,7 +32,8 @@ def test_bench_load_answers_no_5xx_and_loses_no_write(backend: str) -> None:
         args += ["--database-url", TEST_DATABASE_URL, "--queue-url", TEST_REDIS_URL]
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
-    report = json.loads(result.output)
+    assert "ignoring ILLUSION_STUDIO_DATABASE_URL" in result.stderr
+    report = json.loads(result.stdout)
     assert report["database"] == ("sqlite" if backend == "sqlite" else "postgresql")
     assert report["requests"] > 0 and report["5xx"] == 0 and report["transport_errors"] == 0
     assert report["lost_writes"] == 0, report["lost_by_check"]

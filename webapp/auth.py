@@ -135,12 +135,15 @@ def init_auth(app: Flask) -> None:
         if scheme.lower() != "bearer" or not token:
             return None
         settings, token = runtime().settings, token.strip()
-        account = user_service.token_account(g.db, token)
-        if (blocked := throttle.token_blocked(settings, account)) is not None:
-            wait, why = blocked
-            raise TooManyRequests(why, retry_after=wait)
+        if (wait := throttle.token_blocked(settings, None)) is not None:  # this address guessed too often
+            raise TooManyRequests(throttle.TOKEN_LIMIT_MESSAGE, retry_after=wait)
         user = user_service.user_for_token(g.db, token)
         if user is None:
+            # Past its account's limit a wrong secret gets 429; the right one always passes, so a
+            # stranger who knows a token's (public) id cannot lock its owner's scripts out.
+            account = user_service.token_account(g.db, token)
+            if (wait := throttle.token_blocked(settings, account)) is not None:
+                raise TooManyRequests(throttle.TOKEN_LIMIT_MESSAGE, retry_after=wait)
             throttle.count_bad_token(settings, account)
             return None
         if g.db.dirty:

@@ -47,28 +47,30 @@ def limit_login(view: Any) -> Any:
                          error_message="too many failed logins from this address")(view)
 
 
-def _token_limits(settings: Settings, account: int | None) -> list[tuple[RateLimitItem, tuple[str, str], str]]:
-    """(limit, counter key, what the 429 says) for this address and, when the token names one, its account."""
-    checks = [(parse(settings.token_limit_per_address), ("token", get_remote_address()),
-               "too many bad API tokens from this address")]
+# One answer for both limits: which one was hit would tell a guesser which token ids exist.
+TOKEN_LIMIT_MESSAGE = "too many bad API tokens; try again later"
+
+
+def _token_limits(settings: Settings, account: int | None) -> list[tuple[RateLimitItem, tuple[str, str]]]:
+    """(limit, counter key) for this address and, when the token names one, its account."""
+    checks = [(parse(settings.token_limit_per_address), ("token", get_remote_address()))]
     if account is not None:
-        checks.append((parse(settings.token_limit_per_account), ("token-account", str(account)),
-                       "too many bad API tokens for this account"))
+        checks.append((parse(settings.token_limit_per_account), ("token-account", str(account))))
     return checks
 
 
-def token_blocked(settings: Settings, account: int | None) -> tuple[int, str] | None:
-    """(seconds to wait, why) when this address, or the account ``account`` whose token was sent,
-    may not try a bearer token again yet; else None.
+def token_blocked(settings: Settings, account: int | None) -> int | None:
+    """Seconds to wait when this address, or the account ``account`` a token named, may not try a
+    bearer token again yet; else None.
 
     Fails open while the counters' storage is unreachable (Redis down), as the login limits do
     (``RATELIMIT_SWALLOW_ERRORS``): an outage of the counters must not lock every script out, and
     the requests that need the queue on that Redis answer 503 anyway."""
     try:
-        for item, key, why in _token_limits(settings, account):
+        for item, key in _token_limits(settings, account):
             if not limiter.limiter.test(item, *key):
                 reset = limiter.limiter.get_window_stats(item, *key).reset_time
-                return max(1, int(reset - time.time()) + 1), why
+                return max(1, int(reset - time.time()) + 1)
     except Exception:  # redis.ConnectionError, sqlite3.Error …: the storage is down
         log.warning("token throttling skipped: its counters are unreachable", exc_info=True)
     return None
@@ -77,7 +79,7 @@ def token_blocked(settings: Settings, account: int | None) -> tuple[int, str] | 
 def count_bad_token(settings: Settings, account: int | None) -> None:
     """Count a refused bearer token against this address and, when it named one, its account."""
     try:
-        for item, key, _ in _token_limits(settings, account):
+        for item, key in _token_limits(settings, account):
             limiter.limiter.hit(item, *key)
     except Exception:  # see token_blocked
         log.warning("a bad token went uncounted: the throttle's counters are unreachable", exc_info=True)

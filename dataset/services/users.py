@@ -77,8 +77,9 @@ def _token_digest(token: str) -> str:
 
 # ``ist_<row id>_<secret>``: the id names the token (and so its account, for the per-account
 # throttle) and reveals nothing secret. The old ``ist_<secret>`` form is exactly 47 characters,
-# too short to match, so the two never get confused.
+# too short to match the new one; a new token's bare secret (no ``ist_``) matches neither.
 _NAMED_TOKEN = re.compile(r"ist_([1-9][0-9]{0,9})_([A-Za-z0-9_-]{43})")
+_OLD_TOKEN = re.compile(r"ist_[A-Za-z0-9_-]{43}")
 
 
 def issue_token(session: Session, user: User, label: str = "") -> str:
@@ -111,6 +112,8 @@ def user_for_token(session: Session, token: str) -> User | None:
     """The active user this bearer token (new or old format) belongs to, else None."""
     named = _named(token)
     if named is None:  # the old form: found by the hash of the whole token
+        if _OLD_TOKEN.fullmatch(token) is None:
+            return None
         row = session.scalar(select(ApiToken).where(ApiToken.token_sha256 == _token_digest(token)))
     else:
         row = session.get(ApiToken, named[0])
