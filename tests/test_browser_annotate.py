@@ -265,11 +265,11 @@ def test_annotator_clicks_pairs_submits_and_a_second_annotator_works_alongside(b
         page.screenshot(path=str(SHOTS / "annotate-4-conflict.png"))
 
         page.keyboard.press("?")
-        expect(page.locator("#help")).to_be_visible()
-        expect(page.locator("#help-keys")).to_contain_text("propagate the current pair to the next frames")
+        expect(page.locator("#keys-help")).to_be_visible()
+        expect(page.locator("#keys-help")).to_contain_text("propagate the current pair to the next frames")
         page.screenshot(path=str(SHOTS / "annotate-5-help.png"))
         page.keyboard.press("Escape")
-        expect(page.locator("#help")).to_be_hidden()
+        expect(page.locator("#keys-help")).to_be_hidden()
 
         # reloading takes the server's version and offers this browser's changes back
         page.reload()

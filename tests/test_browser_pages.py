@@ -1,6 +1,7 @@
 """The list pages and the sample page in a real browser at 1366x768: the Frames pager never runs
-past the end and keeps its place in the address, tiles open their frame, every page with shortcuts
-explains them under `?`, labels agree, and an ended session says so politely and leads back."""
+past the end and keeps its place in the address, the pager takes odd addresses with care, tiles
+open their frame, every page with shortcuts explains them under `?`, labels agree, a refused retry
+stays said, and an ended session says so politely and leads back."""
 
 from __future__ import annotations
 
@@ -120,6 +121,10 @@ def test_each_page_with_shortcuts_explains_them_under_question_mark(browser, dem
     page, errors = _page(browser, demo_url, "curator")
     help_dialog = page.locator("#keys-help")
     expected = {"/frames": ["next page", "open the frame"], "/jobs": ["next page (older jobs)"],
+                # Annotate's own table, every group of it, and its note
+                "/annotate/1": ["Segment", "include a point (green)", "Right-click Alt+Click", "Touch up",
+                                "Ctrl+Shift+Z Ctrl+Y", "View", "masks more / less opaque", "Frame",
+                                "delete the frame (redundant or imperceptible)", "saved as a draft"],
                 "/samples/1": ["accept the sample", "before ↔ after rectification", "back to the samples"],
                 "/review": ["first / last frame of the page", "approve the frame", "reject: 1 blurry, 2 ",
                             "select the page", "Mouse: click focuses"],
@@ -160,7 +165,82 @@ def test_each_page_with_shortcuts_explains_them_under_question_mark(browser, dem
     expect(help_dialog).to_be_hidden()
     expect(first).to_be_focused()
     expect(first).to_have_attribute("data-state", state)
+    # Ctrl+digit in the reason picker is the browser's (switch tabs), not a reason
+    page.keyboard.press("r")
+    picker = page.locator("#reason-picker")
+    expect(picker).to_be_visible()
+    page.keyboard.press("Control+1")
+    expect(picker).to_be_visible()
+    page.keyboard.press("Escape")
+    expect(picker).to_be_hidden()
+    expect(first).to_have_attribute("data-state", state)
     assert page.locator("#samples-status").inner_text() == ""
+    assert errors == []
+
+
+def test_pager_takes_the_address_with_care(browser, demo_url: str) -> None:  # type: ignore[no-untyped-def]
+    from playwright.sync_api import expect
+
+    page, errors = _page(browser, demo_url, "curator")
+    total = json.loads(page.evaluate("u => fetch(u).then(r => r.text())", "/api/v1/frames?limit=1"))["total"]
+    assert 2 < total < 60
+    # ?limit= is a whole number of items in 1..500, the API's largest page; anything else is the page's own
+    for asked, shown, kept in (("2.5", 2, "limit=2"), ("100000", total, "limit=500"), ("-4", 1, "limit=1"),
+                               ("lots", total, "/frames")):
+        page.goto(demo_url + f"/frames?limit={asked}")
+        expect(page.locator("#frame-total")).to_have_text(f"1–{shown} of {total}")
+        expect(page).to_have_url(re.compile(re.escape(kept) + "$"))
+        expect(page.locator("#frame-status")).to_have_text("")
+
+    # a link's video that is gone: the filter shows, and ✕ leads back to every frame
+    page.goto(demo_url + "/frames?video_id=999999")
+    chip = page.locator("#video-filter")
+    expect(chip).to_contain_text("video #999999 (not found)")
+    expect(page.locator("#frame-grid .empty")).to_be_visible()
+    chip.locator("button").click()
+    expect(chip).to_have_count(0)
+    expect(page).to_have_url(demo_url + "/frames")
+    expect(page.locator("#frame-total")).to_have_text(f"1–{total} of {total}")
+
+    # Jobs has no total, so past its end (no job is older than #1) the first page, whose place is
+    # known: its range and buttons agree
+    jobs = json.loads(page.evaluate("u => fetch(u).then(r => r.text())", "/api/v1/jobs?limit=500"))["items"]
+    assert len(jobs) > 2
+    page.goto(demo_url + "/jobs?limit=2&offset=40&after=1")
+    expect(page.locator("#jobs-range")).to_have_text("1–2")
+    expect(page.locator("#prev-page")).to_be_disabled()
+    expect(page.locator("#next-page")).to_be_enabled()
+    expect(page).to_have_url(demo_url + "/jobs?limit=2")
+    assert [int(i) for i in page.locator("#jobs tbody tr").evaluate_all("rows => rows.map(r => r.dataset.jobId)")] \
+        == [j["id"] for j in jobs[:2]]
+    assert errors == []
+
+
+def test_a_refused_retry_stays_said_while_the_jobs_refresh(browser, demo_url: str) -> None:  # type: ignore[no-untyped-def]
+    from playwright.sync_api import expect
+
+    page, errors = _page(browser, demo_url, "curator")
+    listed = re.compile(r"/api/v1/jobs\?")
+
+    def newest_failed(route) -> None:  # type: ignore[no-untyped-def]
+        # The newest job shown as failed, so that it offers Retry; the server still knows it succeeded.
+        response = route.fetch()
+        body = response.json()
+        body["items"][0]["state"] = "failed"
+        route.fulfill(response=response, json=body)
+
+    page.route(listed, newest_failed)
+    page.goto(demo_url + "/jobs")
+    row = page.locator("#jobs tbody tr").first
+    job_id = row.get_attribute("data-job-id")
+    row.get_by_role("button", name="Retry").click()
+    status = page.locator("#jobs-status")
+    said = re.compile(rf"^Job #{job_id} was not retried: job {job_id} is \w+; only failed or interrupted jobs can be")
+    expect(status).to_have_text(said)
+    for _ in range(2):  # the table refreshes every 2 s; the answer stays
+        with page.expect_response(listed):
+            pass
+    expect(status).to_have_text(said)
     assert errors == []
 
 

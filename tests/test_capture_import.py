@@ -357,6 +357,9 @@ def test_reconstruction_by_order(runtime: Runtime, tmp_path: Path, video_id: int
     write_reconstruction(tmp_path / "short", ["a", "b"])
     with runtime.sessions() as s, pytest.raises(CaptureError, match="2 pairs, video .* has 3 frames"):
         reconstruction_params(s, video_id, tmp_path / "short", match="order")
+    write_reconstruction(tmp_path / "one", ["a"])
+    with runtime.sessions() as s, pytest.raises(CaptureError, match=r"\b1 pair, video .* has 3 frames"):
+        reconstruction_params(s, video_id, tmp_path / "one", match="order")
 
 
 def test_reconstruction_errors(runtime: Runtime, tmp_path: Path, video_id: int) -> None:

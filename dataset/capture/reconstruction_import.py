@@ -128,8 +128,8 @@ def _by_index(stems: list[str], frames: list[Any], video_id: int) -> list[Any]:
 
 def _by_order(stems: list[str], frames: list[Any], video_id: int) -> list[Any]:
     if len(stems) != len(frames):
-        raise CaptureError(f"matching by order needs one file pair per frame: {len(stems)} pairs, "
-                           f"video {video_id} has {len(frames)} frames")
+        raise CaptureError(f"matching by order needs one file pair per frame: {plural(len(stems), 'pair')}, "
+                           f"video {video_id} has {plural(len(frames), 'frame')}")
     return list(frames)
 
 

@@ -1,29 +1,12 @@
-// Small helpers every page shares: JSON fetch with the CSRF header, failures as Errors, and polling.
-import { showSessionEnded } from "./session_banner.js";
+// Small helpers every page shares: a JSON request that throws when refused, polling, elements.
+import { call } from "./request.js";
+import { sessionEnded } from "./session_ended.js";
 
-const csrf = document.querySelector('meta[name="csrf-token"]')?.content ?? "";
-
+// Resolves to the JSON answer; a refusal or a lost connection throws request.js's Error.
 export async function api(url, { method = "GET", body } = {}) {
-  const response = await fetch(url, {
-    method,
-    headers: { "Accept": "application/json", "Content-Type": "application/json", "X-CSRFToken": csrf },
-    body: body === undefined ? undefined : JSON.stringify(body),
-    credentials: "same-origin",
-  });
-  const data = await response.json().catch(() => ({}));
-  if (!response.ok) throw failure(response.status, data, response.statusText);
+  const { ok, data, error } = await call(url, { method, body });
+  if (!ok) throw error;
   return data;
-}
-
-// The Error for a failed response. Pages send no tokens, so a 401 means the session ended: the
-// page-wide notice says so, and `sessionEnded` tells the page to leave out a message of its own.
-export function failure(status, data = {}, statusText = "") {
-  const err = new Error(data.error ?? `${status} ${statusText}`);
-  if (status === 401) {
-    err.sessionEnded = true;
-    showSessionEnded();
-  }
-  return err;
 }
 
 // Call `fn` now and every `ms` while the tab is visible; stop when the session has ended.
@@ -33,7 +16,7 @@ export function poll(fn, ms) {
     try {
       await fn();
     } catch (err) {
-      if (err.sessionEnded) return;  // nothing will load until the person logs in again
+      if (sessionEnded(err)) return;  // nothing will load until the person logs in again
       console.warn(err);
     }
     timer = setTimeout(tick, document.hidden ? ms * 4 : ms);

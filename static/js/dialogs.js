@@ -1,5 +1,6 @@
 // Modal dialogs that ask for one choice: the reject-reason picker of the review and samples pages,
 // the Annotate page's type, delete and confirm dialogs.
+import { browserKey } from "./keys.js";
 
 // Opens `dialog`; resolves to the value of the button that closed it, "" when it was cancelled.
 export function choose(dialog) {
@@ -13,7 +14,7 @@ export function choose(dialog) {
 // (defaultPrevented) even though the dialog has closed by the time they see it.
 export function keyChoices(dialog) {
   document.addEventListener("keydown", (event) => {
-    if (!dialog.open || event.key.length !== 1) return;
+    if (!dialog.open || event.key.length !== 1 || browserKey(event)) return;
     const button = dialog.querySelector(`button[data-key="${CSS.escape(event.key)}"]`);
     if (!button) return;
     event.preventDefault();

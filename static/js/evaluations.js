@@ -1,5 +1,6 @@
 // The evaluations list (refreshed every two seconds) and the launch form, which posts to the API.
 import { api, el, poll } from "./api.js";
+import { sessionEnded } from "./session_ended.js";
 
 const root = document.getElementById("evaluations");
 const table = document.getElementById("evaluation-list");
@@ -49,7 +50,7 @@ form.addEventListener("submit", async (event) => {
     location.href = `${root.dataset.page}/${evaluation.id}`;
   } catch (err) {
     error.textContent = err.message;
-    error.hidden = Boolean(err.sessionEnded);
+    error.hidden = sessionEnded(err);
   }
 });
 

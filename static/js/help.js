@@ -8,13 +8,24 @@ function keys(text) {
   return text.split("`").map((part, i) => (i % 2 ? el("kbd", {}, part) : part)).filter((part) => part !== "");
 }
 
-// shortcuts: [[keys, what they do]]; note: a line under the table (mouse use, say).
+// A table of shortcuts for each heading and the rows under it (one table where there is no heading).
+function tables(shortcuts) {
+  const groups = [];
+  for (const entry of shortcuts) {
+    const heading = typeof entry === "string";
+    if (heading || !groups.length) groups.push({ title: heading ? entry : "", rows: [] });
+    if (!heading) groups.at(-1).rows.push(el("tr", {}, el("td", {}, ...keys(entry[0])), el("td", {}, entry[1])));
+  }
+  return groups.map(({ title, rows }) => el("section", {}, title ? el("h3", {}, title) : "",
+    el("table", { className: "keys" }, el("tbody", {}, ...rows))));
+}
+
+// shortcuts: [[keys, what they do]], with a heading (a string) before each group where a page has
+// many; note: a line under the table (mouse use, say).
 export function keyboardHelp(shortcuts, { note = "" } = {}) {
-  const rows = [...shortcuts, ["`?`", "this help"]].map(([key, what]) =>
-    el("tr", {}, el("td", {}, ...keys(key)), el("td", {}, what)));
   const dialog = el("dialog", { id: "keys-help", className: "keys-help" },
     el("h2", { id: "keys-help-title" }, "Keyboard shortcuts"),
-    el("table", { className: "keys" }, el("tbody", {}, ...rows)),
+    el("div", { className: "keys-groups" }, ...tables([...shortcuts, ["`?`", "this help"]])),
     note ? el("p", { className: "muted" }, note) : "",
     el("form", { method: "dialog" }, el("button", {}, "Close")));
   dialog.setAttribute("aria-labelledby", "keys-help-title");

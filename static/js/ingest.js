@@ -1,11 +1,12 @@
 // Uploads videos one by one with a byte progress bar (XHR: fetch has no upload progress),
 // then follows each ingest job's progress until it finishes.
-import { api, el, failure, poll } from "./api.js";
+import { api, el, poll } from "./api.js";
 import { summary } from "./job_summary.js";
+import { failure, HEADERS } from "./request.js";
+import { sessionEnded } from "./session_ended.js";
 
 const form = document.getElementById("upload");
 const list = document.getElementById("uploads");
-const csrf = document.querySelector('meta[name="csrf-token"]').content;
 
 function upload(file, fields, onProgress) {
   return new Promise((resolve, reject) => {
@@ -14,8 +15,7 @@ function upload(file, fields, onProgress) {
     for (const [key, value] of fields) body.append(key, value);
     const xhr = new XMLHttpRequest();
     xhr.open("POST", form.dataset.src);
-    xhr.setRequestHeader("X-CSRFToken", csrf);
-    xhr.setRequestHeader("Accept", "application/json");
+    for (const [name, value] of Object.entries(HEADERS)) xhr.setRequestHeader(name, value);
     xhr.upload.onprogress = (e) => e.lengthComputable && onProgress(e.loaded / e.total);
     xhr.onload = () => {
       const data = JSON.parse(xhr.responseText || "{}");
@@ -77,7 +77,7 @@ async function uploadAll() {
       row.querySelector("progress").value = 0;
       follow(job, row);
     } catch (err) {
-      row.querySelector(".status").textContent = err.sessionEnded ? "not uploaded" : err.message;
+      row.querySelector(".status").textContent = sessionEnded(err) ? "not uploaded" : err.message;
       row.classList.add("failed");
     }
   }

@@ -1,6 +1,7 @@
 // One job's page: state and progress, what it made, its parameters, timings and log, live until it ends.
 import { api, el, poll } from "./api.js";
 import { joined, madeLinks, summary } from "./job_summary.js";
+import { sessionEnded } from "./session_ended.js";
 
 const root = document.getElementById("job");
 const $ = (id) => document.getElementById(id);
@@ -27,7 +28,7 @@ const stop = poll(async () => {
   try {
     job = await api(root.dataset.src);
   } catch (err) {
-    if (!err.sessionEnded) {
+    if (!sessionEnded(err)) {
       $("job-summary").textContent = err.message;  // e.g. "no job 7" (or one this user may not see)
       $("job-summary").classList.add("error");
     }

@@ -4,6 +4,7 @@ import { api, el, poll } from "./api.js";
 import { keyboardHelp } from "./help.js";
 import { joined, madeLinks, summary } from "./job_summary.js";
 import { pagedList } from "./pager.js";
+import { sayFailure } from "./session_ended.js";
 
 const table = document.getElementById("jobs");
 const filters = document.getElementById("job-filters");
@@ -30,16 +31,19 @@ function draw({ items }) {
   table.tBodies[0].replaceChildren(...(items.length ? items.map(row) : [el("tr", {}, el("td", { colSpan: 8 }, none))]));
 }
 
-const { load } = pagedList({ src: table.dataset.src, form: filters, size: 50, draw,
-                             range: document.getElementById("jobs-range"), status });
+const { load, refresh } = pagedList({ src: table.dataset.src, form: filters, size: 50, draw,
+                                      range: document.getElementById("jobs-range"), status });
 
+// The answer stays on the status line until the next retry: the table's refreshes leave it there.
 async function retryJob(job) {
+  status.textContent = "";
   try {
     await api(`${table.dataset.src}/${job.id}/retry`, { method: "POST" });
-    await load();
   } catch (err) {
-    if (!err.sessionEnded) status.textContent = `Job #${job.id} was not retried: ${err.message}`;
+    sayFailure((text) => { status.textContent = `Job #${job.id} was not retried: ${text}`; })(err);
+    return;
   }
+  refresh();
 }
 
 keyboardHelp([["`]` or `n`", "next page (older jobs)"], ["`[` or `p`", "previous page (newer jobs)"]],

@@ -2,6 +2,7 @@
 // launch form, which posts to the API and opens the new run's page.
 import { api, el, poll } from "./api.js";
 import { duration, fixed, runUrl } from "./runs.js";
+import { sessionEnded } from "./session_ended.js";
 
 const root = document.getElementById("models");
 const table = document.getElementById("runs");
@@ -66,7 +67,7 @@ if (form) {
       location.href = runUrl(root.dataset.runPage, run.run);
     } catch (err) {
       error.textContent = err.message;
-      error.hidden = Boolean(err.sessionEnded);
+      error.hidden = sessionEnded(err);
       button.disabled = false;
     }
   });

@@ -6,22 +6,30 @@ import { isShortcut } from "./keys.js";
 import { sayFailure } from "./session_ended.js";
 
 const KEYS = { "[": -1, p: -1, "]": 1, n: 1 };
+const MOST = 500;  // the largest page the list APIs serve (their `limit` maximum in webapp/api)
+
+// A count from the address as an integer in min..max; `fallback` when it is not a number at all.
+function count(text, min, max, fallback) {
+  const n = Math.trunc(Number(text));
+  return text && Number.isFinite(n) ? Math.min(max, Math.max(min, n)) : fallback;
+}
 
 // src: the API list; form: its filters (every named control is a query parameter); size: items a
 // page (?limit= in the address overrides it); draw(page): show page.items; range: "61–97 of 97";
-// status: where a failure is said.
+// status: where a failure is said (the page's own messages there are left alone).
 // Returns { load, refresh }: load() to poll (it throws), refresh() to show once (it says what failed).
 export function pagedList({ src, form, size, draw, range, status }) {
   const prevButton = document.getElementById("prev-page");
   const nextButton = document.getElementById("next-page");
   const controls = [...form.elements].filter((c) => c.name);
   const start = new URLSearchParams(location.search);  // a reload or a shared link
-  const perPage = Number(start.get("limit")) || size;
+  const perPage = count(start.get("limit"), 1, MOST, size);
   for (const c of controls) if (start.has(c.name)) c.value = start.get(c.name);
-  let view = { offset: Math.max(0, Number(start.get("offset")) || 0), after: start.get("after"),
+  let view = { offset: count(start.get("offset"), 0, Infinity, 0), after: start.get("after"),
                before: start.get("before") };
   let shown = { offset: 0, items: [], prev: null, next: null };
   let queue = Promise.resolve();
+  let failed = "";  // this pager's failure on the status line, taken back once a page loads
 
   function params() {
     const q = new URLSearchParams();
@@ -38,8 +46,9 @@ export function pagedList({ src, form, size, draw, range, status }) {
     query.set("limit", perPage);
     const page = await api(`${src}?${query}`);
     if (!page.items.length && page.prev) {
-      // Past the end (what was there has left the filter meanwhile): the last page instead.
-      view = { offset: 0, after: null, before: page.prev };
+      // Past the end (what was there has left the filter meanwhile): the last page instead where
+      // the total tells its offset, else the first page, the one whose offset is known.
+      view = { offset: 0, after: null, before: page.total != null ? page.prev : null };
       return show();
     }
     const n = page.items.length;
@@ -52,7 +61,8 @@ export function pagedList({ src, form, size, draw, range, status }) {
     range.textContent = n ? `${view.offset + 1}–${view.offset + n}${page.total != null ? ` of ${page.total}` : ""}` : "none";
     prevButton.disabled = !page.prev;
     nextButton.disabled = !page.next;
-    status.textContent = "";
+    if (status.textContent === failed) status.textContent = "";
+    failed = "";
     draw(page);
   }
 
@@ -62,7 +72,7 @@ export function pagedList({ src, form, size, draw, range, status }) {
     queue = run.catch(() => {});
     return run;
   }
-  const said = (run) => run.catch(sayFailure((text) => { status.textContent = text; }));
+  const said = (run) => run.catch(sayFailure((text) => { status.textContent = failed = text; }));
   const load = () => serially(show);
   const refresh = () => said(load());
 

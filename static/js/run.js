@@ -3,6 +3,7 @@
 import { api, el, poll } from "./api.js";
 import { lineChart } from "./chart.js";
 import { LIVE, duration, fixed, short } from "./runs.js";
+import { sessionEnded } from "./session_ended.js";
 
 const root = document.getElementById("run");
 const $ = (id) => document.getElementById(id);
@@ -111,7 +112,7 @@ function control(id, path, body) {
       finished = false;
       await refresh();
     } catch (err) {
-      status.textContent = err.sessionEnded ? "" : err.message;
+      status.textContent = sessionEnded(err) ? "" : err.message;
     }
   });
 }

@@ -4,7 +4,7 @@
 const login = document.querySelector('meta[name="login-url"]')?.content ?? "/login";
 
 // The login page, told to come back here (the login view refuses targets off this site).
-export function loginUrl() {
+function loginUrl() {
   return `${login}?${new URLSearchParams({ next: location.pathname + location.search + location.hash })}`;
 }
 

@@ -1,5 +1,5 @@
-// A request refused because the session ended throws an Error with `sessionEnded` (api.js), and
-// api.js shows the "log in again" banner for it: pages add no error text of their own.
+// A request refused because the session ended fails with an Error with `sessionEnded`, and
+// request.js shows the "log in again" banner for it: pages add no error text of their own.
 
 export const sessionEnded = (err) => err?.sessionEnded === true;
 

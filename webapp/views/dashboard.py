@@ -25,4 +25,5 @@ def frames() -> ResponseReturnValue:
     """The frames browser (one video's with ?video_id=N); its script keeps filters and page in the address."""
     video_id = request.args.get("video_id", type=int)
     video = g.db.get(Video, video_id) if video_id and 0 < video_id <= DB_INT_MAX else None
-    return render_template("frames.html", states=list(FrameState), video=video)
+    return render_template("frames.html", states=list(FrameState), video=video,
+                           video_filter=request.args.get("video_id", ""))

@@ -1,6 +1,6 @@
-// The shortcuts, in one table that both the key handler and the help overlay read, so the help
-// can never describe keys that don't work. Rows without `keys` are mouse gestures, shown in the help only.
-import { el } from "../api.js";
+// The shortcuts, in one table that both the key handler and the keyboard help (help.js) read, so the
+// help can never describe keys that don't work. Rows without `keys` are mouse gestures, shown in the
+// help only; its `?` row is help.js's own.
 
 const DIGITS = ["1", "2", "3", "4", "5", "6", "7", "8", "9"];
 
@@ -35,7 +35,6 @@ const SHORTCUTS = [
   { keys: ["ArrowLeft", "ArrowRight"], show: ["←", "→"], does: "previous / next frame of the video", command: "step" },
   { keys: ["p"], show: ["P"], does: "propagate the current pair to the next frames", command: "propagate" },
   { keys: ["Delete", "x"], show: ["Del", "X"], does: "delete the frame (redundant or imperceptible)", command: "deleteFrame" },
-  { keys: ["?"], show: ["?"], does: "this help", command: "help" },
 ];
 
 // "Ctrl+Shift+z" style names; Shift only counts where it doesn't already pick the character ("?", "+").
@@ -55,15 +54,5 @@ export function shortcutFor(event) {
   return { command: shortcut.command, key };
 }
 
-export function renderHelp(container) {
-  const sections = [];
-  for (const s of SHORTCUTS) {
-    if (s.group) {
-      sections.push(el("section", {}, el("h3", {}, s.group), el("dl", {})));
-      continue;
-    }
-    const keys = s.show.flatMap((k, i) => [i ? " " : "", el("kbd", {}, k)]);
-    sections.at(-1).lastChild.append(el("dt", {}, ...keys), el("dd", {}, s.does));
-  }
-  container.replaceChildren(...sections);
-}
+// The table as keyboardHelp (help.js) takes it: group headings, and each row's keys in backticks.
+export const helpRows = () => SHORTCUTS.map((s) => s.group ?? [s.show.map((k) => `\`${k}\``).join(" "), s.does]);

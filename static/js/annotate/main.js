@@ -6,8 +6,9 @@
 // the annotation), segment.js (clicks → masks), tools.js (the canvas and its tools), panel.js,
 // render.js, messages.js and propagate.js; page.js holds the state they share.
 import { keyChoices } from "../dialogs.js";
+import { keyboardHelp } from "../help.js";
 import { addPair, clearRegion, pickType, removePair, selectKind, selectPair, undoRedo } from "./editing.js";
-import { renderHelp, shortcutFor } from "./keys.js";
+import { helpRows, shortcutFor } from "./keys.js";
 import { start, stepFrame } from "./lifecycle.js";
 import { $, page, prefs, root } from "./page.js";
 import { listenPanel } from "./panel.js";
@@ -15,8 +16,6 @@ import { propagate } from "./propagate.js";
 import { render } from "./render.js";
 import { deleteFrame, submit } from "./submit.js";
 import { setBrush, setOpacity, setTool, toggleMasks, view } from "./tools.js";
-
-const help = $("help");
 
 // By the command names of keys.js; `key` is the key that chose the command.
 const COMMANDS = {
@@ -44,24 +43,20 @@ const COMMANDS = {
   step: (key) => stepFrame(key === "ArrowLeft" ? -1 : 1),
   propagate,
   deleteFrame,
-  help: () => help.showModal(),
 };
 
 document.querySelectorAll("dialog.choices").forEach(keyChoices);  // 1–9 choose a type or a reason
 
 document.addEventListener("keydown", (event) => {
   if (event.defaultPrevented) return;  // a dialog's choice
-  if (document.querySelector("dialog[open]")) {
-    if (help.open && event.key === "?") help.close();
-    return;
-  }
+  if (document.querySelector("dialog[open]")) return;
   if (event.target.closest("input, select, textarea")) {
     if (event.key === "Escape") $("canvas").focus();
     return;
   }
   if (["Enter", " "].includes(event.key) && event.target.closest("button, a")) return;  // let them press
   const shortcut = shortcutFor(event);
-  if (!shortcut || (!page.history && !["help", "submit"].includes(shortcut.command))) return;
+  if (!shortcut || (!page.history && shortcut.command !== "submit")) return;
   event.preventDefault();
   COMMANDS[shortcut.command](shortcut.key);
 });
@@ -78,6 +73,7 @@ window.annotator = {
 };
 
 listenPanel();
-renderHelp($("help-keys"));
+keyboardHelp(helpRows(),
+             { note: "Work is saved as a draft two seconds after each change and kept in this browser until then." });
 render();
 start(Number(root.dataset.frameId));

@@ -70,7 +70,6 @@ function onClick(target, run) {
 export function listenPanel() {
   onClick("prev-frame", () => stepFrame(-1));
   onClick("next-frame", () => stepFrame(1));
-  onClick("help-button", () => $("help").showModal());
   onClick("add-pair", addPair);
   onClick("propagate", propagate);
   onClick("submit", submit);
