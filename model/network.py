@@ -9,6 +9,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import torch
+import torch.nn.functional as F
 from torch import Tensor, nn
 
 from model.confidence import ConfidenceHead
@@ -65,6 +66,7 @@ class FusionNetwork(nn.Module):
         left_n, right_n = 2 * (left / 255.0) - 1, 2 * (right / 255.0) - 1
         mono_result = self.mono(left_n, mono)
         mono_full = normalize_mono(mono_result.disparity)
+        mono_low = F.avg_pool2d(mono_full, self.factor)
         stereo = self.stereo_branch(left_n, right_n, mono_result.features, iters=iters, all_iterates=all_iterates)
         disparity_low = stereo.iterates_low[-1]
         cost = stereo.corr.lookup(disparity_low.detach())
@@ -73,9 +75,14 @@ class FusionNetwork(nn.Module):
             logits = self.confidence(cost, vlm=vlm, noise=noise)
         else:
             logits = self.confidence(cost, features=stereo.left_features)
-        fused = self.fusion(mono_full, disparity_low, stereo.iterates[-1], logits, stereo.hidden, stereo.mask)
-        return FusionOutput(fused.disparity, stereo.iterates, stereo.iterates[-1], fused.aligned,
-                            torch.sigmoid(logits), logits, mono_result.disparity)
+        confidence = torch.sigmoid(logits)
+        fused = self.fusion(mono_low, disparity_low, confidence, stereo.hidden, stereo.mask)
+        size = left.shape[2:]
+        scale = F.interpolate(fused.scale, size, mode="bilinear", align_corners=False)
+        shift = F.interpolate(fused.shift, size, mode="bilinear", align_corners=False)
+        aligned = self.factor * (scale * mono_full + shift)
+        return FusionOutput(fused.disparity, stereo.iterates, stereo.iterates[-1], aligned, confidence, logits,
+                            mono_result.disparity)
 
     def _check(self, left: Tensor, right: Tensor, mono: Tensor | None) -> None:
         if left.ndim != 4 or left.shape[1] != 3 or left.shape != right.shape:

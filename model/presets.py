@@ -22,7 +22,6 @@ PRESET_DIR = Path(__file__).parent / "presets"
 MonoBackend = Literal["precomputed", "depth-anything-v2"]
 VlmBackend = Literal["lite", "qwen2-vl"]
 FusionRule = Literal["paper", "released"]
-StereoInit = Literal["zero", "soft-argmax"]
 
 
 @dataclass(frozen=True)
@@ -40,9 +39,6 @@ class ModelConfig:
     motion_dim: int = 32
     corr_levels: int = 4
     corr_radius: int = 4
-    # Where the GRU starts: RAFT-Stereo's zero disparity, or (as IGEV-Stereo) the soft-argmax of the
-    # finest correlation volume, which a short training run cannot afford to walk to.
-    stereo_init: StereoInit = "zero"
     mono_backend: MonoBackend = "precomputed"
     mono_model_path: str | None = None
     mono_input_size: int = 518  # long side given to Depth Anything (a multiple of its patch)

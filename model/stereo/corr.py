@@ -26,17 +26,6 @@ class CorrPyramid1D:
             volume = F.avg_pool2d(volume, (1, 2), stride=(1, 2))
             self.pyramid.append(volume)
 
-    def soft_argmax(self, temperature: Tensor) -> Tensor:
-        """B×1×h×w expected disparity under a softmax (× ``temperature``) over every candidate
-        match of the finest level (right x ≤ left x), pixels at this resolution."""
-        batch, height, width = self.shape
-        volume = self.pyramid[0].view(batch, height, width, width)
-        x = torch.arange(width, device=volume.device, dtype=volume.dtype)
-        candidates = x.view(-1, 1) - x.view(1, -1)  # [left x, right x] → disparity
-        logits = (volume * temperature).masked_fill(candidates < 0, float("-inf"))
-        expected = (torch.softmax(logits, dim=-1) * candidates.clamp_min(0)).sum(-1)
-        return expected.unsqueeze(1)
-
     @property
     def channels(self) -> int:
         return self.levels * (2 * self.radius + 1)

@@ -63,7 +63,6 @@ class StereoBranch(nn.Module):
         self.context = ContextAdapter(context_channels, config.hidden_dims)
         corr_channels = config.corr_levels * (2 * config.corr_radius + 1)
         self.update = MultiLevelUpdate(config.hidden_dims, corr_channels, config.motion_dim, self.factor)
-        self.log_temperature = nn.Parameter(torch.zeros(())) if config.stereo_init == "soft-argmax" else None
 
     def forward(self, left: Tensor, right: Tensor, mono_features: Tensor, *, iters: int,
                 all_iterates: bool) -> StereoResult:
@@ -74,19 +73,15 @@ class StereoBranch(nn.Module):
         left_features, right_features = features[:batch], features[batch:]
         corr = CorrPyramid1D(left_features, right_features, levels=self.levels, radius=self.radius)
         net, context = self.context(mono_features)
-        if self.log_temperature is None:
-            disparity = torch.zeros_like(left_features[:, :1])
-        else:
-            disparity = corr.soft_argmax(self.log_temperature.exp())
+        disparity = torch.zeros_like(left_features[:, :1])
         low, full = [], []
         for step in range(iters):
-            # As RAFT: every iteration is supervised on its own, the lookup position is not
-            # differentiated; a soft-argmax start learns through the first iterate only.
-            position = disparity.detach()
+            # As RAFT: every iteration is supervised on its own, the lookup position is not differentiated.
+            disparity = disparity.detach()
             last = step == iters - 1
-            net, delta, mask = self.update(net, context, corr.lookup(position), position,
+            net, delta, mask = self.update(net, context, corr.lookup(disparity), disparity,
                                            with_mask=all_iterates or last)
-            disparity = (disparity if step == 0 else position) + delta
+            disparity = disparity + delta
             low.append(disparity)
             if mask is not None:
                 full.append(convex_upsample(disparity, mask, self.factor))
