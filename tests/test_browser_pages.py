@@ -25,13 +25,27 @@ def demo_url(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyp
         yield url
 
 
-def _page(browser, url: str, role: str):  # type: ignore[no-untyped-def]
-    """A page in a fresh context logged in as ``role``, and the list its script errors go to."""
-    page = browser.new_context(viewport=VIEWPORT).new_page()
-    errors: list[str] = []
-    page.on("pageerror", lambda error: errors.append(str(error)))
-    login(page, url, role, f"{role}-demo")
-    return page, errors
+@pytest.fixture
+def open_page(browser, demo_url: str):  # type: ignore[no-untyped-def]
+    """Opens a page in a fresh context logged in as a role: (page, the list its script errors go
+    to). Every context is closed after the test, its routes first: a page left polling would run
+    its route handlers against a server the next test has stopped."""
+    contexts = []
+
+    def open_(role: str):  # type: ignore[no-untyped-def]
+        context = browser.new_context(viewport=VIEWPORT)
+        contexts.append(context)
+        page = context.new_page()
+        errors: list[str] = []
+        page.on("pageerror", lambda error: errors.append(str(error)))
+        login(page, demo_url, role, f"{role}-demo")
+        return page, errors
+
+    yield open_
+    for context in contexts:
+        for page in context.pages:
+            page.unroute_all(behavior="ignoreErrors")
+        context.close()
 
 
 def _place(item: dict, frame_id: int | None = None) -> str:
@@ -44,10 +58,10 @@ def _tile_ids(page) -> list[int]:  # type: ignore[no-untyped-def]
         "nodes => nodes.map(n => n.dataset.frameId)")]
 
 
-def test_frames_pages_within_bounds_keeps_its_place_and_opens_frames(browser, demo_url: str, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_frames_pages_within_bounds_keeps_its_place_and_opens_frames(open_page, demo_url: str, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     from playwright.sync_api import expect
 
-    page, errors = _page(browser, demo_url, "annotator")
+    page, errors = open_page("annotator")
     every = json.loads(page.evaluate("u => fetch(u).then(r => r.text())", "/api/v1/frames?limit=500"))
     ids, total = [f["id"] for f in every["items"]], every["total"]
     assert total == len(ids) > 10
@@ -115,10 +129,10 @@ def test_frames_pages_within_bounds_keeps_its_place_and_opens_frames(browser, de
     assert errors == []
 
 
-def test_each_page_with_shortcuts_explains_them_under_question_mark(browser, demo_url: str, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_each_page_with_shortcuts_explains_them_under_question_mark(open_page, demo_url: str, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     from playwright.sync_api import expect
 
-    page, errors = _page(browser, demo_url, "curator")
+    page, errors = open_page("curator")
     help_dialog = page.locator("#keys-help")
     expected = {"/frames": ["next page", "open the frame"], "/jobs": ["next page (older jobs)"],
                 # Annotate's own table, every group of it, and its note
@@ -178,10 +192,10 @@ def test_each_page_with_shortcuts_explains_them_under_question_mark(browser, dem
     assert errors == []
 
 
-def test_pager_takes_the_address_with_care(browser, demo_url: str) -> None:  # type: ignore[no-untyped-def]
+def test_pager_takes_the_address_with_care(open_page, demo_url: str) -> None:  # type: ignore[no-untyped-def]
     from playwright.sync_api import expect
 
-    page, errors = _page(browser, demo_url, "curator")
+    page, errors = open_page("curator")
     total = json.loads(page.evaluate("u => fetch(u).then(r => r.text())", "/api/v1/frames?limit=1"))["total"]
     assert 2 < total < 60
     # ?limit= is a whole number of items in 1..500, the API's largest page; anything else is the page's own
@@ -216,10 +230,10 @@ def test_pager_takes_the_address_with_care(browser, demo_url: str) -> None:  # t
     assert errors == []
 
 
-def test_a_refused_retry_stays_said_while_the_jobs_refresh(browser, demo_url: str) -> None:  # type: ignore[no-untyped-def]
+def test_a_refused_retry_stays_said_while_the_jobs_refresh(open_page, demo_url: str) -> None:  # type: ignore[no-untyped-def]
     from playwright.sync_api import expect
 
-    page, errors = _page(browser, demo_url, "curator")
+    page, errors = open_page("curator")
     listed = re.compile(r"/api/v1/jobs\?")
 
     def newest_failed(route) -> None:  # type: ignore[no-untyped-def]
@@ -244,10 +258,10 @@ def test_a_refused_retry_stays_said_while_the_jobs_refresh(browser, demo_url: st
     assert errors == []
 
 
-def test_labels_agree_and_counts_read_as_words(browser, demo_url: str) -> None:  # type: ignore[no-untyped-def]
+def test_labels_agree_and_counts_read_as_words(open_page, demo_url: str) -> None:  # type: ignore[no-untyped-def]
     from playwright.sync_api import expect
 
-    page, errors = _page(browser, demo_url, "curator")
+    page, errors = open_page("curator")
     sample = json.loads(page.evaluate("u => fetch(u).then(r => r.text())", "/api/v1/samples/1"))
     place = _place(sample, sample["frame_id"])
     page.goto(demo_url + "/samples/1")
@@ -288,10 +302,10 @@ def test_labels_agree_and_counts_read_as_words(browser, demo_url: str) -> None: 
     assert errors == []
 
 
-def test_an_ended_session_says_so_once_and_leads_back_to_the_same_place(browser, demo_url: str, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_an_ended_session_says_so_once_and_leads_back_to_the_same_place(open_page, demo_url: str, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     from playwright.sync_api import expect
 
-    page, errors = _page(browser, demo_url, "curator")
+    page, errors = open_page("curator")
     page.goto(demo_url + "/frames?state=prefiltered")
     expect(page.locator("#frame-grid li[data-frame-id]").first).to_be_visible()
     jobs = page.context.new_page()
