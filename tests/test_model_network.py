@@ -12,7 +12,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from model.checkpoint import load_checkpoint, load_network, save_checkpoint  # noqa: E402
-from model.fusion import GlobalFusion, least_squares_affine, refine_affine, robust_affine  # noqa: E402
+from model.fusion import refine_affine  # noqa: E402
 from model.losses import fusion_loss, sequence_gamma  # noqa: E402
 from model.network import FusionNetwork, FusionOutput  # noqa: E402
 from model.predictor import Predictor  # noqa: E402
@@ -68,19 +68,6 @@ def test_correlation_peaks_at_the_true_disparity_and_upsampling_scales_values() 
     assert up.shape == (1, 1, 12, 20) and torch.allclose(up[..., 4:8, 4:16], torch.full((4, 12), 8.0))
 
 
-def test_the_soft_argmax_start_finds_the_true_disparity() -> None:
-    torch.manual_seed(0)
-    features = torch.randn(1, 64, 4, 32)
-    right = torch.roll(features, shifts=-3, dims=3)  # left x matches right x − 3
-    corr = CorrPyramid1D(features, right, levels=2, radius=4)
-    start = corr.soft_argmax(torch.tensor(4.0))
-    assert start.shape == (1, 1, 4, 32)
-    assert torch.allclose(start[..., 3:], torch.full((1, 1, 4, 29), 3.0), atol=0.05)
-    assert (start[..., 0] == 0).all()  # the first column has no candidate but disparity 0
-    flat = corr.soft_argmax(torch.tensor(0.0))  # no preference: the mean of the candidates 0…x
-    assert torch.allclose(flat[0, 0, 0], torch.arange(32.0) / 2)
-
-
 def test_every_stage_has_its_shape_and_units() -> None:
     config = load_preset("lite", SMALL)
     torch.manual_seed(0)
@@ -116,36 +103,6 @@ def test_refining_affine_parameters_pools_confident_neighbours() -> None:
     glob = refine_affine(params, confidence, kernel=None)
     mean = (0.9 * 1 + 0.6 * 3) / 1.5
     assert torch.allclose(glob, torch.tensor([[[[1.0, mean, 3.0, mean]]]]))
-
-
-def test_the_robust_fit_ignores_an_illusion_that_tilts_the_plain_one() -> None:
-    generator = torch.Generator().manual_seed(0)
-    mono = torch.rand(2, 1, 24, 40, generator=generator)
-    stereo = 30 * mono + 5
-    stereo[:, :, 4:14, 8:22] += 12  # a fooled region: 15% of the pixels disagree by 12 px
-    s, t = robust_affine(mono, stereo)
-    assert torch.allclose(s, torch.full_like(s, 30.0), atol=0.05) and torch.allclose(t, torch.full_like(t, 5.0), atol=0.05)
-    plain_s, plain_t = least_squares_affine(mono, stereo)
-    assert (plain_t - 5).abs().min() > 1.0  # what the robust fit is for
-    weighted_s, _ = least_squares_affine(mono, stereo, (stereo - 30 * mono - 5 < 1).float())
-    assert torch.allclose(weighted_s, torch.full_like(s, 30.0), atol=1e-3)
-
-
-def test_an_untrained_fusion_blends_at_full_resolution_by_confidence() -> None:
-    config = load_preset("lite", {**SMALL, "fusion_dim": 8}).model
-    fusion = GlobalFusion(config, 16)
-    with torch.no_grad():
-        fusion.heads.weight.zero_()
-    factor, (height, width) = fusion.factor, (32, 64)
-    mono = torch.rand(1, 1, height, width, generator=torch.Generator().manual_seed(1))
-    stereo_full = factor * (20 * mono + 3)  # full-resolution detail the working resolution cannot hold
-    stereo = torch.nn.functional.avg_pool2d(stereo_full, factor) / factor
-    logits = torch.full_like(stereo, -8.0)  # nowhere confident: the aligned mono everywhere
-    out = fusion(mono, stereo, stereo_full, logits, torch.zeros(1, 16, *stereo.shape[2:]),
-                 torch.zeros(1, 9 * factor**2, *stereo.shape[2:]))
-    assert out.disparity.shape == (1, 1, height, width)
-    assert (out.disparity - stereo_full).abs().max() < 0.05 * factor
-    assert torch.allclose(out.disparity, out.aligned, atol=1e-2)
 
 
 def test_the_loss_equals_a_hand_computation() -> None:
