@@ -16,11 +16,15 @@ def test_a_browser_whose_session_ended_is_told_so_plainly(app, client) -> None: 
 
 
 def test_scripts_still_get_the_how_to(app, tokens) -> None:  # type: ignore[no-untyped-def]
+    from webapp.auth import BAD_TOKEN
+
     script = app.test_client()
-    for headers in ({}, {"Authorization": "Bearer ist_not-a-token"}):
+    for headers, message in (({}, "authentication required: log in or send 'Authorization: Bearer <token>'"),
+                             ({"Authorization": "Bearer ist_not-a-token"}, BAD_TOKEN)):
         response = script.get("/api/v1/frames", headers=headers)
         assert response.status_code == 401
-        assert response.get_json()["error"] == "authentication required: log in or send 'Authorization: Bearer <token>'"
+        assert response.get_json()["error"] == message
+    assert "illusion-studio users token NAME" in BAD_TOKEN
 
 
 def test_log_in_again_returns_to_the_page_and_only_to_this_site(app, client) -> None:  # type: ignore[no-untyped-def]

@@ -14,7 +14,8 @@ from typing import Any, TypeVar
 from flask import Flask, abort, current_app, g, jsonify, redirect, request, session, url_for
 from flask_login import AnonymousUserMixin, LoginManager, UserMixin, current_user, login_user, logout_user
 from flask_wtf.csrf import CSRFProtect
-from werkzeug.exceptions import TooManyRequests
+from werkzeug.datastructures import WWWAuthenticate
+from werkzeug.exceptions import HTTPException, TooManyRequests, Unauthorized
 
 from dataset.models import Role, User
 from dataset.services import sessions as session_service
@@ -27,6 +28,9 @@ PUBLIC = "public"
 ROLE_ATTR = "required_role"
 SESSION_ID = "sid"  # the cookie's key holding the server-side session's id
 SESSION_ENDED = "Your session ended — log in again."
+BAD_TOKEN = ("this API token is not valid: mistyped, revoked, or its user was deactivated or given a new password "
+             "(both revoke tokens for good); an admin issues a new one with 'illusion-studio users token NAME'")
+TOKEN_REFUSED = "token_refused"  # g's key for why this request's bearer token was refused
 
 login_manager = LoginManager()
 csrf = CSRFProtect()
@@ -91,6 +95,10 @@ def _unauthenticated_message() -> str:
 
 def sign_in(user: User) -> None:
     """Start a server-side session for ``user`` and put its id in the cookie."""
+    # Nothing issued before the login outlives it: the CSRF token of the login page (a planted
+    # one included) is void, and the next page gets a new one.
+    session.clear()
+    g.pop(current_app.config.get("WTF_CSRF_FIELD_NAME", "csrf_token"), None)
     # A fresh random id per login: an id seen before (a copied cookie) never comes back to life.
     session[SESSION_ID] = session_service.start_session(g.db, user)
     g.db.commit()
@@ -131,20 +139,21 @@ def init_auth(app: Flask) -> None:
 
     @login_manager.request_loader
     def load_from_token(req: Any) -> SessionUser | None:
+        # Never raises: a loader that raised would run again for the error page (its top bar asks
+        # who is logged in) and raise there too. _authorise answers the refusal instead.
         scheme, _, token = req.headers.get("Authorization", "").partition(" ")
         if scheme.lower() != "bearer" or not token:
             return None
         settings, token = runtime().settings, token.strip()
-        if (wait := throttle.token_blocked(settings, None)) is not None:  # this address guessed too often
-            raise TooManyRequests(throttle.TOKEN_LIMIT_MESSAGE, retry_after=wait)
         user = user_service.user_for_token(g.db, token)
         if user is None:
-            # Past its account's limit a wrong secret gets 429; the right one always passes, so a
-            # stranger who knows a token's (public) id cannot lock its owner's scripts out.
-            account = user_service.token_account(g.db, token)
-            if (wait := throttle.token_blocked(settings, account)) is not None:
-                raise TooManyRequests(throttle.TOKEN_LIMIT_MESSAGE, retry_after=wait)
-            throttle.count_bad_token(settings, account)
+            # The right token always passes: only bad ones are counted, and past the address's or
+            # the named account's limit they get 429, so neither a stranger who knows a token's
+            # (public) id nor others' guesses from the same proxy lock a script out.
+            wait = throttle.bad_token(settings, user_service.token_account(g.db, token))
+            refusal: HTTPException = TooManyRequests(throttle.TOKEN_LIMIT_MESSAGE, retry_after=wait) if wait \
+                else Unauthorized(BAD_TOKEN, www_authenticate=WWWAuthenticate("bearer", {"error": "invalid_token"}))
+            setattr(g, TOKEN_REFUSED, refusal)
             return None
         if g.db.dirty:
             g.db.commit()  # keep the token's last-used time
@@ -158,6 +167,11 @@ def init_auth(app: Flask) -> None:
         required = getattr(view, ROLE_ATTR, None)
         if required is None:
             abort(403, "this route declares no role")
+        if "Authorization" in request.headers:
+            _ = current_user.is_authenticated  # run the token loader now, before the view
+            refused: HTTPException | None = g.get(TOKEN_REFUSED)
+            if refused is not None:  # a bad token on any route, a page or /login included: 401 or 429
+                raise refused
         if required != PUBLIC:
             if not current_user.is_authenticated:
                 if is_api_request():

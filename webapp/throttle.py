@@ -1,10 +1,27 @@
-"""Login and API-token throttling with Flask-Limiter: failures per account and per address answer 429.
+"""Login and API-token throttling: refuse the guesser, slow the target down, never lock its owner out.
+
+Logins (the spirit of OWASP ASVS V2.2). Failed logins are counted per (user name, address), per
+user name and per address. Past ``login_limit_per_account_address`` that address gets 429 with
+``Retry-After`` for that name, its password unchecked: the guesser is refused. The wider counters
+never refuse, since anyone could drive them up: past ``login_slowdown_per_account`` (one name, all
+addresses) or ``login_slowdown_per_address`` (one address, all names) every login they cover waits
+before its password is checked, 0.25 s doubling with each further failure up to
+``login_slowdown_max_s``. Right or wrong password alike, so the wait tells nothing; then the login
+succeeds or fails as usual. A stranger can thus slow an account down but not lock its owner out,
+and the owner's own address is refused only once it has been guessing itself.
+
+API tokens. A right token always passes. A bad one is counted per address and, when it names a
+token (``ist_<id>_…``), per account; past either limit bad tokens get 429 instead of 401. Others'
+bad tokens from the same proxy therefore never lock a script out. The secrets are 256-bit: the
+limit makes guessing visible and cheap to refuse, it does not guard a guessable secret.
 
 Storage: the deployment's Redis when the queue runs on Redis; otherwise a small SQLite file in the
 data dir (:class:`SqliteLimitStorage`). The `limits` package ships memory, Redis, Memcached and
 MongoDB storages; memory counts per process (a multi-process server would multiply every limit)
 and the other two are services this app does not otherwise need, whereas a SQLite file is shared
-by every process on the machine, like the default job queue.
+by every process on the machine, like the default job queue. While the counters are unreachable
+(Redis down) throttling is skipped: an outage of the counters must not lock everyone out, and the
+requests that need the queue on that Redis answer 503 anyway.
 """
 
 from __future__ import annotations
@@ -13,9 +30,11 @@ import logging
 import sqlite3
 import threading
 import time
-from typing import Any
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, TypeVar
 
-from flask import Flask, current_app, request
+from flask import Flask
 from flask_limiter import Limiter
 from flask_limiter.util import get_remote_address
 from limits import RateLimitItem, parse
@@ -25,64 +44,118 @@ from dataset.settings import Settings
 
 log = logging.getLogger(__name__)
 limiter = Limiter(key_func=get_remote_address)
+T = TypeVar("T")
+FIRST_WAIT_S = 0.25  # the first slowed-down login's wait; each further failure doubles it
 
 
-def _failed(response: Any) -> bool:
-    return response.status_code == 401
+@dataclass(frozen=True)
+class Counter:
+    """One fixed-window counter of failures: its limit and what it counts for (``key``)."""
+
+    limit: RateLimitItem
+    key: tuple[str, ...]
+
+    def count(self) -> int:
+        return limiter.limiter.storage.get(self.limit.key_for(*self.key))
+
+    def exceeded(self) -> bool:
+        return self.count() >= self.limit.amount
+
+    def hit(self) -> None:
+        limiter.limiter.hit(self.limit, *self.key)
+
+    def clear(self) -> None:
+        limiter.limiter.clear(self.limit, *self.key)
+
+    def retry_after(self) -> int:
+        """Whole seconds until this window ends (at least 1)."""
+        reset = limiter.limiter.get_window_stats(self.limit, *self.key).reset_time
+        return max(1, int(reset - time.time()) + 1)
 
 
-def _login_account() -> str:
-    return "account:" + request.form.get("name", "").strip().lower()
+def _unless_down(what: str, default: T, action: Callable[[], T]) -> T:
+    """``action()``, or ``default`` while the counters' storage is unreachable (logged)."""
+    try:
+        return action()
+    except Exception:  # redis.ConnectionError, sqlite3.Error …: the storage is down
+        log.warning("%s skipped: the throttle's counters are unreachable", what, exc_info=True)
+        return default
 
 
-def _setting(name: str) -> str:
-    return getattr(current_app.extensions["runtime"].settings, name)
+@dataclass(frozen=True)
+class LoginCounters:
+    """The three counters a login attempt for one name from one address touches."""
+
+    pair: Counter
+    account: Counter
+    address: Counter
+
+    @classmethod
+    def of(cls, settings: Settings, name: str) -> LoginCounters:
+        """Counters for user name ``name`` (case and surrounding spaces ignored) from this request's address."""
+        name, address, scope = name.strip().lower(), get_remote_address(), settings.queue_name
+        return cls(pair=Counter(parse(settings.login_limit_per_account_address), (scope, "login", name, address)),
+                   account=Counter(parse(settings.login_slowdown_per_account), (scope, "login-account", name)),
+                   address=Counter(parse(settings.login_slowdown_per_address), (scope, "login-address", address)))
+
+    def refused(self) -> int | None:
+        """Seconds until this address may try this name again, once it failed too often; else None."""
+        return _unless_down("login throttling", None,
+                            lambda: self.pair.retry_after() if self.pair.exceeded() else None)
+
+    def wait_s(self, settings: Settings) -> float:
+        """How long this attempt waits: 0 until the name's or the address's failures reach their
+        slow-down limit, then 0.25 s doubling with each further failure, at most ``login_slowdown_max_s``."""
+        def wait() -> float:
+            beyond = max(c.count() - c.limit.amount for c in (self.account, self.address))
+            return 0.0 if beyond < 0 else min(settings.login_slowdown_max_s, FIRST_WAIT_S * 2.0 ** min(beyond, 32))
+
+        return _unless_down("login slow-down", 0.0, wait)
+
+    def slow_down(self, settings: Settings) -> None:
+        """Wait :meth:`wait_s` before the password is checked (a plain sleep: no lock is held)."""
+        if (seconds := self.wait_s(settings)) > 0:
+            time.sleep(seconds)
+
+    def failed(self) -> None:
+        def hit() -> None:
+            for counter in (self.pair, self.account, self.address):
+                counter.hit()
+
+        _unless_down("counting a failed login", None, hit)
+
+    def succeeded(self) -> None:
+        """The owner got in from here: this address's failures for the name are forgotten. The
+        wider counters stay, or a guesser could clear them by logging into an account of their own."""
+        _unless_down("clearing a login's failures", None, self.pair.clear)
 
 
-def limit_login(view: Any) -> Any:
-    """Throttle a login view: only answers 401 (wrong name or password) count."""
-    view = limiter.limit(lambda: _setting("login_limit_per_account"), key_func=_login_account, methods=["POST"],
-                         deduct_when=_failed, error_message="too many failed logins for this account")(view)
-    return limiter.limit(lambda: _setting("login_limit_per_address"), methods=["POST"], deduct_when=_failed,
-                         error_message="too many failed logins from this address")(view)
-
-
-# One answer for both limits: which one was hit would tell a guesser which token ids exist.
+# One answer for both token limits: which one was hit would tell a guesser which token ids exist.
 TOKEN_LIMIT_MESSAGE = "too many bad API tokens; try again later"
 
 
-def _token_limits(settings: Settings, account: int | None) -> list[tuple[RateLimitItem, tuple[str, str]]]:
-    """(limit, counter key) for this address and, when the token names one, its account."""
-    checks = [(parse(settings.token_limit_per_address), ("token", get_remote_address()))]
+def _token_counters(settings: Settings, account: int | None) -> list[Counter]:
+    """Bad tokens from this address and, when the token names one, for its account."""
+    scope = settings.queue_name
+    counters = [Counter(parse(settings.token_limit_per_address), (scope, "token", get_remote_address()))]
     if account is not None:
-        checks.append((parse(settings.token_limit_per_account), ("token-account", str(account))))
-    return checks
+        counters.append(Counter(parse(settings.token_limit_per_account), (scope, "token-account", str(account))))
+    return counters
 
 
-def token_blocked(settings: Settings, account: int | None) -> int | None:
-    """Seconds to wait when this address, or the account ``account`` a token named, may not try a
-    bearer token again yet; else None.
+def bad_token(settings: Settings, account: int | None) -> int | None:
+    """Count a refused bearer token; returns the seconds to wait when this address, or the account
+    ``account`` it named, was already past its limit (answer 429), else None (answer 401)."""
+    def count() -> int | None:
+        counters = _token_counters(settings, account)
+        for counter in counters:
+            if counter.exceeded():
+                return counter.retry_after()
+        for counter in counters:
+            counter.hit()
+        return None
 
-    Fails open while the counters' storage is unreachable (Redis down), as the login limits do
-    (``RATELIMIT_SWALLOW_ERRORS``): an outage of the counters must not lock every script out, and
-    the requests that need the queue on that Redis answer 503 anyway."""
-    try:
-        for item, key in _token_limits(settings, account):
-            if not limiter.limiter.test(item, *key):
-                reset = limiter.limiter.get_window_stats(item, *key).reset_time
-                return max(1, int(reset - time.time()) + 1)
-    except Exception:  # redis.ConnectionError, sqlite3.Error …: the storage is down
-        log.warning("token throttling skipped: its counters are unreachable", exc_info=True)
-    return None
-
-
-def count_bad_token(settings: Settings, account: int | None) -> None:
-    """Count a refused bearer token against this address and, when it named one, its account."""
-    try:
-        for item, key in _token_limits(settings, account):
-            limiter.limiter.hit(item, *key)
-    except Exception:  # see token_blocked
-        log.warning("a bad token went uncounted: the throttle's counters are unreachable", exc_info=True)
+    return _unless_down("token throttling", None, count)
 
 
 def storage_uri(settings: Settings) -> str:
@@ -93,8 +166,7 @@ def storage_uri(settings: Settings) -> str:
 
 def init_throttle(app: Flask, settings: Settings) -> None:
     app.config.update(RATELIMIT_STORAGE_URI=storage_uri(settings), RATELIMIT_STRATEGY="fixed-window",
-                      RATELIMIT_HEADERS_ENABLED=True, RATELIMIT_SWALLOW_ERRORS=True,
-                      RATELIMIT_KEY_PREFIX=f"{settings.queue_name}:limits")
+                      RATELIMIT_SWALLOW_ERRORS=True)
     limiter.init_app(app)
 
 

@@ -1,4 +1,9 @@
-"""Users, passwords and API tokens."""
+"""Users, passwords and API tokens.
+
+A password reset or a deactivation ends the user's sessions and revokes their API tokens for good:
+whoever might have taken over the account keeps no way in. Reactivation lets the user log in
+again with their password but brings no token back; an admin issues a new one.
+"""
 
 from __future__ import annotations
 
@@ -18,6 +23,7 @@ from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.sessions import end_user_sessions
 from dataset.services.validate import DB_INT_MAX
+from dataset.wording import plural
 
 _NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")  # always fullmatch: "$" would let "admin\n" through
 MIN_PASSWORD = 8
@@ -84,7 +90,9 @@ _OLD_TOKEN = re.compile(r"ist_[A-Za-z0-9_-]{43}")
 
 def issue_token(session: Session, user: User, label: str = "") -> str:
     """A new bearer token ``ist_<id>_<secret>`` for ``user``; only its secret's hash is stored, so
-    print it now or lose it."""
+    print it now or lose it. Refused for a deactivated user: reactivation must not bring tokens."""
+    if not user.active:
+        raise Conflict(f"{user.name} is deactivated; reactivate them first")
     secret = secrets.token_urlsafe(32)
     row = ApiToken(user_id=user.id, token_sha256=_token_digest(secret), label=label)
     session.add(row)
@@ -141,14 +149,19 @@ def _keep_an_admin(session: Session, user: User) -> None:
         raise Conflict(f"{user.name} is the last active admin; make another admin first")
 
 
-def set_active(session: Session, actor_id: int | None, user: User, active: bool) -> None:
-    """Deactivate (ending every session; tokens stop working) or reactivate ``user``; audited."""
-    if not active:
-        _keep_an_admin(session, user)
-        end_user_sessions(session, user.id)
-    user.active = active
-    audit.record(session, actor_id, "user.activate" if active else "user.deactivate", "user", user.id,
-                 name=user.name)
+def set_active(session: Session, actor_id: int | None, user: User, active: bool) -> int:
+    """Deactivate ``user`` (ending every session, revoking every API token for good) or reactivate
+    them (their password works again; no token comes back); audited. Returns the tokens revoked."""
+    if active:
+        user.active = True
+        audit.record(session, actor_id, "user.activate", "user", user.id, name=user.name)
+        return 0
+    _keep_an_admin(session, user)
+    end_user_sessions(session, user.id)
+    tokens = _delete_tokens(session, user)
+    user.active = False
+    audit.record(session, actor_id, "user.deactivate", "user", user.id, name=user.name, tokens=tokens)
+    return tokens
 
 
 def set_role(session: Session, actor_id: int | None, user: User, role: Role | str) -> None:
@@ -164,16 +177,30 @@ def set_role(session: Session, actor_id: int | None, user: User, role: Role | st
     end_user_sessions(session, user.id)
 
 
-def reset_password(session: Session, actor_id: int | None, user: User, password: str) -> None:
-    """Set a new password and end every session of ``user``; audited (without the password)."""
+def reset_password(session: Session, actor_id: int | None, user: User, password: str) -> int:
+    """Set a new password, end every session of ``user`` and revoke their API tokens for good;
+    audited (without the password). Returns the tokens revoked."""
     _check_password(password)
     user.password_hash = generate_password_hash(password)
     end_user_sessions(session, user.id)
-    audit.record(session, actor_id, "user.password", "user", user.id, name=user.name)
+    tokens = _delete_tokens(session, user)
+    audit.record(session, actor_id, "user.password", "user", user.id, name=user.name, tokens=tokens)
+    return tokens
 
 
 def revoke_tokens(session: Session, actor_id: int | None, user: User) -> int:
     """Delete every API token of ``user``; returns how many; audited."""
-    count = session.execute(delete(ApiToken).where(ApiToken.user_id == user.id)).rowcount
+    count = _delete_tokens(session, user)
     audit.record(session, actor_id, "user.revoke_tokens", "user", user.id, name=user.name, tokens=count)
+    return count
+
+
+def revoked_words(count: int) -> str:
+    """What a reset or deactivation did to the tokens, as the Users page and the CLI both say it."""
+    return f"{plural(count, 'API token')} revoked for good"
+
+
+def _delete_tokens(session: Session, user: User) -> int:
+    count = session.execute(delete(ApiToken).where(ApiToken.user_id == user.id)).rowcount
+    session.expire(user, ["tokens"])  # the page lists the count: no stale collection in this session
     return count

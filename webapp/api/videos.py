@@ -20,6 +20,7 @@ from dataset.services.prefilter import launch_prefilter
 from dataset.services.validate import db_int
 from webapp.api.blueprint import api, cursor_args, int_arg, json_body
 from webapp.auth import requires
+from webapp.jobs.queue import check_reachable, queue_for
 from webapp.runtime import runtime
 
 
@@ -63,6 +64,8 @@ def upload_video() -> ResponseReturnValue:
                            dedup_hamming=DEFAULT_DEDUP_HAMMING, user_id=current_user.id, original_name=name,
                            prefilter=request.form.get("prefilter", "1") not in ("0", "false", ""))
     rt = runtime()
+    # Before the file is stored: a request refused with 503 leaves nothing behind.
+    check_reachable(rt.queue.hueys[queue_for("ingest")])
     key = rt.media.put_stream(upload.stream, ext)
     params["path"] = str(rt.media.path(key))
     user = g.db.get(User, current_user.id)

@@ -67,18 +67,19 @@ def _manage(state: CliState, name: str, change: Callable[[Session, User], T]) ->
 @click.argument("name")
 @pass_state
 def deactivate(state: CliState, name: str) -> None:
-    """Deactivate NAME: their sessions end and their tokens stop working."""
-    _manage(state, name, lambda s, u: user_service.set_active(s, None, u, False))
-    click.echo(f"deactivated {name}")
+    """Deactivate NAME: their sessions end and their API tokens are revoked for good."""
+    count = _manage(state, name, lambda s, u: user_service.set_active(s, None, u, False))
+    click.echo(f"deactivated {name}: sessions ended, {user_service.revoked_words(count)} (reactivating does not bring them back)")
 
 
 @users.command("reactivate")
 @click.argument("name")
 @pass_state
 def reactivate(state: CliState, name: str) -> None:
-    """Let NAME log in again."""
+    """Let NAME log in again; API tokens revoked at deactivation stay revoked."""
     _manage(state, name, lambda s, u: user_service.set_active(s, None, u, True))
-    click.echo(f"reactivated {name}")
+    click.echo(f"reactivated {name}: they can log in again; no API token came back "
+               f"(issue one with 'illusion-studio users token {name}')")
 
 
 @users.command("role")
@@ -96,10 +97,10 @@ def set_role(state: CliState, name: str, role: str) -> None:
 @click.option("--password-stdin", is_flag=True, help="Read the password from the first line of stdin.")
 @pass_state
 def reset_password(state: CliState, name: str, password_stdin: bool) -> None:
-    """Set a new password for NAME (their sessions end)."""
+    """Set a new password for NAME (their sessions end, their API tokens are revoked for good)."""
     password = _read_password(password_stdin)
-    _manage(state, name, lambda s, u: user_service.reset_password(s, None, u, password))
-    click.echo(f"new password set for {name}")
+    count = _manage(state, name, lambda s, u: user_service.reset_password(s, None, u, password))
+    click.echo(f"new password set for {name}: sessions ended, {user_service.revoked_words(count)}")
 
 
 @users.command("revoke-tokens")

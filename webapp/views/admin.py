@@ -1,8 +1,13 @@
-"""User administration: admins only. Every change is audited and applies on the user's next request."""
+"""User administration: admins only. Every change is audited and applies on the user's next request.
+
+Each change answers with a redirect back to the Users page and a flash saying what happened (what
+went wrong included), so the browser never stays on a POST address.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import TypeVar
 
 from flask import Blueprint, flash, g, redirect, render_template, request, url_for
 from flask.typing import ResponseReturnValue
@@ -12,11 +17,13 @@ from sqlalchemy import select
 from dataset.models import Role, User
 from dataset.services import users as user_service
 from dataset.services.errors import ServiceError
+from dataset.wording import plural
 from webapp.api.blueprint import get_or_404
 from webapp.auth import requires
 from webapp.forms import CreateUserForm
 
 bp = Blueprint("admin", __name__)
+T = TypeVar("T")
 
 
 @bp.get("/admin/users")
@@ -44,9 +51,11 @@ def create_user() -> ResponseReturnValue:
 @bp.post("/admin/users/<int:user_id>/active")
 @requires(Role.admin)
 def set_active(user_id: int) -> ResponseReturnValue:
-    active = request.form.get("active") == "1"
-    return _change(user_id, lambda u: user_service.set_active(g.db, current_user.id, u, active),
-                   "Reactivated {name}." if active else "Deactivated {name}; their sessions ended.")
+    if request.form.get("active") == "1":
+        return _change(user_id, lambda u: user_service.set_active(g.db, current_user.id, u, True),
+                       lambda u, _: f"Reactivated {u.name}: they can log in again; no API token came back.")
+    return _change(user_id, lambda u: user_service.set_active(g.db, current_user.id, u, False),
+                   lambda u, n: f"Deactivated {u.name}: sessions ended, {user_service.revoked_words(n)}.")
 
 
 @bp.post("/admin/users/<int:user_id>/role")
@@ -54,7 +63,7 @@ def set_active(user_id: int) -> ResponseReturnValue:
 def set_role(user_id: int) -> ResponseReturnValue:
     role = request.form.get("role", "")
     return _change(user_id, lambda u: user_service.set_role(g.db, current_user.id, u, role),
-                   "{name} is now " + role + ".")
+                   lambda u, _: f"{u.name} is now {role}.")
 
 
 @bp.post("/admin/users/<int:user_id>/password")
@@ -62,29 +71,32 @@ def set_role(user_id: int) -> ResponseReturnValue:
 def reset_password(user_id: int) -> ResponseReturnValue:
     password = request.form.get("password", "")
     return _change(user_id, lambda u: user_service.reset_password(g.db, current_user.id, u, password),
-                   "New password set for {name}; their sessions ended.")
+                   lambda u, n: f"New password set for {u.name}: sessions ended, {user_service.revoked_words(n)}.")
 
 
 @bp.post("/admin/users/<int:user_id>/tokens/revoke")
 @requires(Role.admin)
 def revoke_tokens(user_id: int) -> ResponseReturnValue:
     return _change(user_id, lambda u: user_service.revoke_tokens(g.db, current_user.id, u),
-                   "Revoked the API tokens of {name}.")
+                   lambda u, n: f"Revoked {plural(n, 'API token')} of {u.name}.")
 
 
-def _change(user_id: int, apply: Callable[[User], object], done: str) -> ResponseReturnValue:
+def _change(user_id: int, apply: Callable[[User], T], done: Callable[[User, T], str]) -> ResponseReturnValue:
+    """Apply one change to user ``user_id``; back to the Users page with what happened, or why not."""
     user = get_or_404(User, user_id, "user")
+    name = user.name
     try:
-        apply(user)
+        result = apply(user)
     except ServiceError as exc:
         g.db.rollback()
-        flash(str(exc), "error")
-        return _users_page(CreateUserForm()), exc.status
-    g.db.commit()
-    flash(done.format(name=user.name), "info")
-    return redirect(url_for("admin.users"))
+        flash(f"Nothing changed for {name}: {str(exc).rstrip('.')}.", "error")
+    else:
+        g.db.commit()
+        flash(done(user, result), "info")
+    return redirect(url_for("admin.users"), 303)
 
 
 def _users_page(form: CreateUserForm) -> str:
     rows = g.db.scalars(select(User).order_by(User.name)).all()
-    return render_template("users.html", users=rows, form=form, me=current_user, roles=list(Role))
+    return render_template("users.html", users=rows, form=form, me=current_user, roles=list(Role),
+                           min_password=user_service.MIN_PASSWORD)

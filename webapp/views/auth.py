@@ -11,9 +11,11 @@ from sqlalchemy import select
 
 from dataset.models import Role
 from dataset.services import users as user_service
+from dataset.wording import plural
 from webapp.auth import public, requires, sign_in, sign_out
 from webapp.forms import LoginForm
-from webapp.throttle import limit_login
+from webapp.runtime import runtime
+from webapp.throttle import LoginCounters
 
 bp = Blueprint("auth", __name__)
 
@@ -35,17 +37,25 @@ def favicon() -> ResponseReturnValue:
 
 @bp.route("/login", methods=["GET", "POST"])
 @public
-@limit_login
 def login() -> ResponseReturnValue:
     if request.method == "GET" and current_user.is_authenticated:
         # Logged in again in another tab: "log in again" links from ended sessions go straight back.
         return redirect(_safe_next(request.args.get("next")))
     form = LoginForm()
     if form.validate_on_submit():
+        settings = runtime().settings
+        counters = LoginCounters.of(settings, form.name.data)
+        if (wait := counters.refused()) is not None:
+            minutes = plural(-(-wait // 60), "minute")
+            flash(f"Too many failed logins for this name from your address: try again in {minutes}.", "error")
+            return render_template("login.html", form=form), 429, {"Retry-After": str(wait)}
+        counters.slow_down(settings)
         user = user_service.authenticate(g.db, form.name.data, form.password.data)
         if user is not None:
+            counters.succeeded()
             sign_in(user)
             return redirect(_safe_next(request.args.get("next")))
+        counters.failed()
         flash("Wrong user name or password.", "error")
         return render_template("login.html", form=form), 401
     return render_template("login.html", form=form)
