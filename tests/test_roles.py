@@ -69,6 +69,8 @@ EXPECTED: dict[str, Role | None] = {
     "models.run": Role.curator,
     "models.compare": Role.curator,
     "models.val_image": Role.curator,
+    "models.run_log": Role.curator,
+    "models.run_log_file": Role.curator,
     "api.list_runs": Role.curator,
     "api.launch_run": Role.admin,
     "api.get_run": Role.curator,

@@ -1,5 +1,6 @@
 // Line charts in inline SVG: several series against step, redrawn whole on every update (a few
 // thousand points at most, so there is nothing to gain from patching the DOM).
+import { formatNumber } from "./labels.js";
 
 const NS = "http://www.w3.org/2000/svg";
 const W = 640, H = 220, PAD = { left: 56, right: 12, top: 22, bottom: 28 };
@@ -12,21 +13,19 @@ function svg(tag, attrs = {}, text) {
   return node;
 }
 
-function ticks(lo, hi, n = 4) {
+// Round values between lo and hi, about n of them; whole numbers only when `integer` (steps).
+export function ticks(lo, hi, n = 4, { integer = false } = {}) {
   if (!(hi > lo)) return [lo];
   const raw = (hi - lo) / n;
   const mag = 10 ** Math.floor(Math.log10(raw));
-  const step = [1, 2, 5, 10].map((m) => m * mag).find((s) => s >= raw) ?? raw;
+  const nice = [1, 2, 5, 10].map((m) => m * mag).find((s) => s >= raw) ?? raw;
+  const step = integer ? Math.max(1, Math.round(nice)) : nice;
   const out = [];
   for (let v = Math.ceil(lo / step) * step; v <= hi + step * 1e-9; v += step) out.push(v);
   return out;
 }
 
-function label(v) {
-  const a = Math.abs(v);
-  if (a !== 0 && (a < 1e-3 || a >= 1e5)) return v.toExponential(1);
-  return String(Number(v.toPrecision(3)));
-}
+const label = (v) => formatNumber(v, 3);
 
 // A chart in `container`; `update(series)` draws [{name, color, points: [[step, value], …]}].
 export function lineChart(container, { title, yLabel = "" }) {
@@ -53,7 +52,7 @@ export function lineChart(container, { title, yLabel = "" }) {
         root.append(svg("line", { x1: PAD.left, x2: W - PAD.right, y1: sy(t), y2: sy(t), class: "chart-grid" }),
                     svg("text", { x: PAD.left - 6, y: sy(t) + 4, "text-anchor": "end", class: "chart-tick" }, label(t)));
       }
-      for (const t of ticks(x0, x1, 6)) {
+      for (const t of ticks(x0, x1, 6, { integer: true })) {
         root.append(svg("text", { x: sx(t), y: H - 8, "text-anchor": "middle", class: "chart-tick" }, label(t)));
       }
       finite.forEach((s, i) => {

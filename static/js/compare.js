@@ -2,6 +2,9 @@
 // validation metrics side by side; refreshed while any of them runs.
 import { api, el, poll } from "./api.js";
 import { COLORS, lineChart } from "./chart.js";
+import { keyboardHelp } from "./help.js";
+import { isShortcut } from "./keys.js";
+import { plural } from "./labels.js";
 import { LIVE, fixed, runUrl } from "./runs.js";
 
 const root = document.getElementById("compare");
@@ -14,10 +17,27 @@ const ROWS = [["all", "epe", "EPE all (px)"], ["all", "bad2", "bad-2 all (%)"], 
               ["non_illusion", "epe", "EPE non-illusion (px)"], ["non_illusion", "bad2", "bad-2 non-illusion (%)"]];
 let done = false;
 
+const version = (r) => r.dataset.id.slice(0, 12);
+
+// Runs of different dataset versions were validated on different samples: say so above the figures.
+function versionWarning(runs) {
+  const versions = new Map();
+  for (const r of runs) versions.set(r.dataset.id, [...(versions.get(r.dataset.id) ?? []), r.run]);
+  const line = document.getElementById("compare-versions");
+  line.hidden = versions.size < 2;
+  line.textContent = versions.size < 2 ? "" : `These runs were trained on ${versions.size} different dataset versions (`
+    + [...versions.entries()].map(([id, ids]) => `${ids.map((i) => `run ${i}`).join(", ")}: ${id.slice(0, 12)}`).join("; ")
+    + "), so their validation figures are measured on different samples: compare them with care.";
+}
+
 function table(runs) {
   const head = el("tr", {}, el("th", {}, "Metric"), ...runs.map((r) =>
     el("th", {}, el("a", { href: runUrl(root.dataset.runPage, r.run) }, `run ${r.run}`), ` (${r.preset}, ${r.state})`)));
+  const differ = new Set(runs.map((r) => r.dataset.id)).size > 1;
   const rows = [
+    el("tr", { className: differ ? "differs" : "" }, el("th", {}, "dataset version"), ...runs.map((r) => el("td", {
+      dataset: { run: r.run, version: r.dataset.id }, title: r.dataset.id },
+      el("code", {}, version(r)), ` (${plural(r.dataset.samples, "sample")}, ${plural(r.dataset.splits?.val ?? 0, "validation sample")})`))),
     el("tr", {}, el("th", {}, "validation step"), ...runs.map((r) => el("td", {}, String(r.last_val?.step ?? "—")))),
     ...ROWS.map(([region, key, label]) => el("tr", {}, el("th", {}, label),
       ...runs.map((r) => el("td", { dataset: { run: r.run } }, fixed(r.last_val?.metrics?.[region]?.[key], key === "epe" ? 3 : 2))))),
@@ -37,7 +57,19 @@ async function refresh() {
   loss.update(series((p) => p.step.filter((s) => s.loss != null).map((s) => [s.step, s.loss])));
   epe.update(series((p) => p.val.filter((v) => v.metrics?.all?.epe != null).map((v) => [v.step, v.metrics.all.epe])));
   table(runs);
+  versionWarning(runs);
   done = runs.every((r) => !LIVE.has(r.state));
 }
 
+document.addEventListener("keydown", (event) => {
+  if (!isShortcut(event) || !/^[1-9]$/.test(event.key)) return;
+  const link = document.querySelectorAll("#compare-table thead a")[Number(event.key) - 1];
+  if (!link) return;
+  event.preventDefault();
+  link.click();
+});
+keyboardHelp([["`1`–`9`", "open the page of the 1st–9th run of the table"]],
+             { note: "Each run keeps its colour on both charts. The page updates by itself while a run goes. "
+                     + "Runs trained on different dataset versions get a warning: their validation samples differ. "
+                     + "To change the runs, tick others on the Models page." });
 poll(refresh, 3000);

@@ -1,12 +1,16 @@
 // One job's page: state and progress, what it made, its parameters, timings and log, live until it ends.
 import { api, el, poll } from "./api.js";
+import { keyboardHelp } from "./help.js";
 import { joined, madeLinks, summary } from "./job_summary.js";
+import { isShortcut } from "./keys.js";
+import { formatNumber } from "./labels.js";
 import { sessionEnded } from "./session_ended.js";
 
 const root = document.getElementById("job");
 const $ = (id) => document.getElementById(id);
 const canReview = root.dataset.canReview === "true";
-const HIDDEN_PARAMS = new Set(["mask"]);  // a COCO RLE is no reading for a person
+// A COCO RLE is no reading for a person; an evaluation's pictures are on its report.
+const HIDDEN_PARAMS = new Set(["mask", "pictures"]);
 
 const when = (iso) => (iso ? iso.replace("T", " ").slice(0, 19) : "—");
 function seconds(from, to) {
@@ -14,13 +18,20 @@ function seconds(from, to) {
   const s = (Date.parse(to) - Date.parse(from)) / 1000;
   return s < 60 ? `${s.toFixed(1)} s` : `${Math.floor(s / 60)} min ${Math.round(s % 60)} s`;
 }
-// server folders are no business of the page: a path shows as its file name
-const shown = (value, key) => (key === "path" ? String(value).split("/").pop() : plain(value));
-const plain = (value) => (typeof value === "object" && value !== null ? JSON.stringify(value) : String(value));
+// Server folders are no business of the page: a path shows as its file name. Numbers read as
+// everywhere else (labels.js); lists and objects as short text, their numbers alike.
+function readable(value, nested = false) {
+  if (value == null) return "—";
+  if (typeof value === "number") return formatNumber(value);
+  if (typeof value === "string") return value.startsWith("/") ? value.split("/").pop() : value;
+  if (Array.isArray(value)) return `${nested ? "[" : ""}${value.map((v) => readable(v, true)).join(", ")}${nested ? "]" : ""}`;
+  const inner = Object.entries(value).map(([k, v]) => `${k}: ${readable(v, true)}`).join(", ");
+  return nested ? `{${inner}}` : inner;
+}
 
 function pairs(object) {
   return Object.entries(object ?? {}).filter(([k]) => !HIDDEN_PARAMS.has(k))
-    .flatMap(([k, v]) => [el("dt", {}, k.replaceAll("_", " ")), el("dd", {}, v == null ? "—" : shown(v, k))]);
+    .flatMap(([k, v]) => [el("dt", {}, k.replaceAll("_", " ")), el("dd", { dataset: { key: k } }, readable(v))]);
 }
 
 const stop = poll(async () => {
@@ -53,3 +64,21 @@ const stop = poll(async () => {
   $("job-log").textContent = job.log || "(nothing logged yet)";
   if (["succeeded", "failed", "interrupted"].includes(job.state)) stop();
 }, 1500);
+
+const KEYS = {
+  m: () => $("job-made").querySelector("a")?.click(),
+  l: () => { $("job-log").scrollIntoView({ block: "center" }); $("job-log").focus(); },
+  u: () => location.assign(root.dataset.list),
+};
+document.addEventListener("keydown", (event) => {
+  const run = KEYS[event.key];
+  if (!run || !isShortcut(event)) return;
+  event.preventDefault();
+  run();
+});
+keyboardHelp([
+  ["`m`", "open the first thing the job made or worked on (a run, an evaluation, a video, a sample…)"],
+  ["`l`", "to the log"],
+  ["`u`", "up to all jobs"],
+], { note: "The page updates by itself until the job ends. A training job's log holds every attempt; "
+          + "its run's page has rank 0's log on its own, to download." });

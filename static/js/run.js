@@ -1,7 +1,10 @@
-// One run, live: its figures every two seconds, and the curve points it has not shown yet
-// (GET …/metrics?after=<last step>), so the charts grow without a reload.
+// One run, live: its figures every two seconds, the curve points it has not shown yet
+// (GET …/metrics?after=<last step>), so the charts grow without a reload, and the tail of rank 0's log.
 import { api, el, poll } from "./api.js";
 import { lineChart } from "./chart.js";
+import { keyboardHelp } from "./help.js";
+import { isShortcut } from "./keys.js";
+import { plural } from "./labels.js";
 import { LIVE, duration, fixed, short } from "./runs.js";
 import { sessionEnded } from "./session_ended.js";
 
@@ -88,6 +91,24 @@ function showRun(run) {
   showCheckpoints(run.checkpoints);
 }
 
+const LOG_LINES = 400;
+
+// The log's tail; the view stays at the newest line while "follow" is ticked.
+async function refreshLog() {
+  const log = await api(`${root.dataset.log}?lines=${LOG_LINES}`);
+  const pre = $("run-log");
+  const text = log.lines.join("\n");
+  if (pre.textContent !== text) pre.textContent = text;
+  if ($("log-follow").checked) pre.scrollTop = pre.scrollHeight;
+  $("log-download").hidden = !log.files.length;
+  $("log-follow").closest("label").hidden = !log.files.length;
+  pre.hidden = !log.files.length;
+  $("log-caption").textContent = !log.files.length
+    ? (LIVE.has(root.dataset.state) ? "No log yet: the trainers have not started." : "No log: the trainers never started (see the job's log).")
+    : `${log.more ? `The last ${plural(log.lines.length, "line")}` : "All"} of ${plural(log.files.length, "file")}`
+      + ` (${(log.bytes / 1024).toFixed(1)} KiB)${LIVE.has(root.dataset.state) ? ", live" : ""}.`;
+}
+
 const metricsUrl = () => `${root.dataset.metrics}?after=${lastStep}&after_val=${lastValStep}`;
 
 async function refresh() {
@@ -96,10 +117,11 @@ async function refresh() {
   addPoints(points);
   showRun(run);
   if (!LIVE.has(run.state)) {
-    // One more round for the last points, then the page stops asking.
+    // One more round for the last points and lines, then the page stops asking.
     addPoints(await api(metricsUrl()));
     finished = true;
   }
+  await refreshLog();
 }
 
 function control(id, path, body) {
@@ -120,5 +142,33 @@ function control(id, path, body) {
 control("run-cancel", "cancel");
 control("run-resume", "resume");
 control("run-promote", "promote", () => ({ checkpoint: $("promote-which").value }));
+function toLog() {
+  $("run-log").scrollIntoView({ block: "center" });
+  $("run-log").focus();
+}
+
+const KEYS = {
+  l: toLog,
+  f: () => { $("log-follow").click(); },
+  j: () => { if ($("run-job")) location.assign($("run-job").href); },
+};
+document.addEventListener("keydown", (event) => {
+  const run = KEYS[event.key];
+  if (!run || !isShortcut(event)) return;
+  event.preventDefault();
+  run();
+});
+$("log-follow").addEventListener("change", () => {
+  if ($("log-follow").checked) $("run-log").scrollTop = $("run-log").scrollHeight;
+});
+
+keyboardHelp([
+  ["`l`", "to rank 0's log"],
+  ["`f`", "follow the log (stay at its newest line) on or off"],
+  ["`j`", "the run's job: its parameters, timings and the log of every attempt"],
+], { note: "The page updates by itself while the run is queued or running. The log is rank 0's output, "
+          + "its files named relative to the workspace; Download has the whole of it. "
+          + "Click a checkpoint to download it; Mark as current model (admins) makes the chosen one the model "
+          + "predict and evaluate use." });
 for (const plot of Object.values(plots)) plot.update([]);
 poll(refresh, 2000);

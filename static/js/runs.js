@@ -1,4 +1,5 @@
 // What the Models pages share: how a run's figures are written.
+import { formatNumber } from "./labels.js";
 
 export function runUrl(template, id) {
   return template.replace(/0$/, String(id));
@@ -16,8 +17,6 @@ export function fixed(value, digits = 3) {
   return value == null ? "—" : Number(value).toFixed(digits);
 }
 
-export function short(value) {
-  return value == null ? "—" : Number(value).toPrecision(3);
-}
+export const short = (value) => formatNumber(value, 3);
 
 export const LIVE = new Set(["queued", "running"]);

@@ -1,9 +1,10 @@
-// One sample's page: accept/reject (curators), and the 3D preview, viser's client playing the
-// sample's scene in a dialog, with a before/after rectification switch.
+// One sample's page: accept/reject (curators, what the sample's state allows), and the 3D preview,
+// viser's client playing the sample's scene in a dialog, with a before/after rectification switch.
+// The open preview is an entry of the tab's history (…/preview): Back closes it to this page.
 import { reasonPicker } from "./dialogs.js";
 import { keyboardHelp } from "./help.js";
 import { isShortcut } from "./keys.js";
-import { decisionShortcuts, review } from "./sample_review.js";
+import { allowedDecisions, decisionShortcuts, rememberDecision, review } from "./sample_review.js";
 import { sayFailure } from "./session_ended.js";
 
 const $ = (id) => document.getElementById(id);
@@ -22,17 +23,37 @@ function say(text, kind = "info") {
   line.dataset.kind = kind;
 }
 
+// The state's badge, and only the buttons its state allows.
+function showState(state) {
+  root.dataset.state = state;
+  const badge = $("sample-state");
+  badge.textContent = state;
+  badge.className = `badge state ${state}`;
+  const allowed = allowedDecisions(state);
+  for (const decision of ["accept", "reject"]) {
+    const button = $(decision);
+    if (button) button.hidden = !allowed.includes(decision);
+  }
+  const note = $("decision-note");
+  if (note) {
+    note.textContent = { accepted: "Accepted: in the dataset. Reject takes it out and sends its frame back to the annotators.",
+                         rejected: "Rejected: its frame went back to the annotators; it comes back as a new sample." }[state] ?? "";
+  }
+}
+
 async function decide(decision) {
   if (root.dataset.canReview !== "true") return say("Only curators accept or reject samples.", "error");
   if (busy) return;
+  if (!allowedDecisions(root.dataset.state).includes(decision)) {
+    return say(root.dataset.state === "accepted" ? "This sample is already accepted." : "This sample is rejected: nothing to decide.");
+  }
   const reason = decision === "reject" ? await pickReason("this sample") : "";
   if (decision === "reject" && !reason) return;
   busy = true;
   try {
     const sample = await review(root.dataset.api, decision, reason);
-    const badge = $("sample-state");
-    badge.textContent = sample.state;
-    badge.className = `badge state ${sample.state}`;
+    showState(sample.state);
+    rememberDecision(sample);
     say(decision === "accept" ? "Accepted: its frame is in the dataset now."
                               : `Rejected (${reason}): the annotation went back to the annotators.`);
   } catch (err) {
@@ -51,11 +72,11 @@ function show(next) {
   frame.src = `${root.dataset.viser}?${new URLSearchParams({ playbackPath: scene })}`;
 }
 
-function open3d() {
+function open3d({ push = true } = {}) {
   if (!stage) return;
   if (!frame.src) show(stage);  // the scene is made on first request: only when someone looks
-  viewer.showModal();
-  history.replaceState(null, "", root.dataset.preview);
+  if (!viewer.open) viewer.showModal();
+  if (push && !history.state?.preview) history.pushState({ preview: true }, "", root.dataset.preview);
 }
 
 function toggleStage() {
@@ -63,7 +84,14 @@ function toggleStage() {
   show(stages[(stages.indexOf(stage) + 1) % stages.length]);
 }
 
-viewer.addEventListener("close", () => history.replaceState(null, "", root.dataset.page));
+// Closing the preview (Esc, Close) takes its history entry back; Back (popstate) closes it.
+viewer.addEventListener("close", () => {
+  if (history.state?.preview) history.back();
+});
+window.addEventListener("popstate", () => {
+  if (history.state?.preview) open3d({ push: false });
+  else if (viewer.open) viewer.close();
+});
 viewer.addEventListener("click", (event) => {
   const button = event.target.closest("button");
   if (button?.dataset.stage) show(button.dataset.stage);
@@ -79,7 +107,7 @@ function back() {
   else location.assign(list);
 }
 
-const COMMANDS = { a: () => decide("accept"), r: () => decide("reject"), x: () => decide("reject"), v: open3d,
+const COMMANDS = { a: () => decide("accept"), r: () => decide("reject"), x: () => decide("reject"), v: () => open3d(),
                    Backspace: back };
 
 document.addEventListener("keydown", (event) => {
@@ -103,5 +131,10 @@ keyboardHelp([
 
 $("accept")?.addEventListener("click", () => decide("accept"));
 $("reject")?.addEventListener("click", () => decide("reject"));
-$("open-3d")?.addEventListener("click", open3d);
-if (root.dataset.openViewer === "true") open3d();
+$("open-3d")?.addEventListener("click", () => open3d());
+showState(root.dataset.state);
+if (root.dataset.openViewer === "true") {
+  // Opened at …/preview: the sample page goes under it, so Back closes the preview to the page.
+  history.replaceState(null, "", root.dataset.page);
+  open3d();
+}

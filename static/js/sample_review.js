@@ -1,6 +1,7 @@
 // Accept/reject of one sample, shared by the samples grid and the sample page.
 import { api } from "./api.js";
 import { reasonShortcut } from "./dialogs.js";
+import { formatNumber } from "./labels.js";
 
 // POSTs the decision to the sample's API URL; resolves to the updated sample.
 export function review(sampleUrl, decision, reason = "") {
@@ -19,7 +20,7 @@ export function keyFigures(sample) {
   const flags = qa.flags ?? [];
   const flagged = (prefix) => flags.some((f) => f.startsWith(prefix));
   const pct = (v) => (v == null ? "–" : `${(100 * v).toFixed(1)} %`);
-  const num = (v, unit = "") => (v == null ? "–" : `${Number(v.toPrecision(3))}${unit}`);
+  const num = (v, unit = "") => (v == null ? "–" : `${formatNumber(v, 3)}${unit}`);
   const inliers = (qa.pairs ?? []).map((p) => p.inlier_ratio).filter((v) => v != null);
   return [
     ["holes", pct(qa.hole_fraction), "share of the right view inpainted", flagged("holes")],
@@ -28,4 +29,35 @@ export function keyFigures(sample) {
      flagged("pair ")],
     ["scale", num(qa.scale ?? sample.params?.scale), "px per unit of monocular disparity", false],
   ];
+}
+
+// The decisions a sample's state still allows (the review service's rule): a generated sample can
+// be accepted or rejected; an accepted one rejected (it leaves the dataset); a rejected one
+// neither — its frame went back to the annotators and comes back as a new sample.
+export function allowedDecisions(state) {
+  return { generated: ["accept", "reject"], accepted: ["reject"] }[state] ?? [];
+}
+
+// What this tab's decisions left each sample in, kept in sessionStorage so that a reload or a
+// visit to a sample's page keeps the count; per user (a tab can change hands at the login page).
+const SESSION_KEY = `sample-decisions:${document.querySelector(".who .user")?.textContent.trim() ?? ""}`;
+
+function decisions() {
+  try {
+    return JSON.parse(sessionStorage.getItem(SESSION_KEY) ?? "{}");
+  } catch {
+    return {};
+  }
+}
+
+// Records the state a decision left `sample` in; returns {accepted, rejected}: this tab's counts.
+export function rememberDecision(sample) {
+  const all = { ...decisions(), [sample.id]: sample.state };
+  sessionStorage.setItem(SESSION_KEY, JSON.stringify(all));
+  return sessionCounts();
+}
+
+export function sessionCounts() {
+  const states = Object.values(decisions());
+  return { accepted: states.filter((s) => s === "accepted").length, rejected: states.filter((s) => s === "rejected").length };
 }

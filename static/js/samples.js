@@ -5,7 +5,7 @@ import { reasonPicker } from "./dialogs.js";
 import { actLikeKeys, focusTile as focusGridTile, gridHelp, listenKeys, serial, setCursor, stepOf, turnPage } from "./grid.js";
 import { keyboardHelp } from "./help.js";
 import { framePlace } from "./labels.js";
-import { decisionShortcuts, keyFigures, review } from "./sample_review.js";
+import { allowedDecisions, decisionShortcuts, keyFigures, rememberDecision, review, sessionCounts } from "./sample_review.js";
 import { sayFailure } from "./session_ended.js";
 
 const $ = (id) => document.getElementById(id);
@@ -30,7 +30,6 @@ const view = { items: [], total: 0, offset: 0, focus: 0, after: null, before: nu
 // ?evaluation=ID&sort=error[&method=M&region=R]: the evaluation's samples, worst first (kept in the address).
 const BY_ERROR = ["evaluation", "sort", "method", "region", "min_error"];
 const byError = new URLSearchParams([...new URLSearchParams(location.search)].filter(([k]) => BY_ERROR.includes(k)));
-const mine = new Map();  // sample id → the state this session's decisions left it in
 
 const enqueue = serial(sayFailure(say));
 
@@ -85,6 +84,10 @@ async function decide(decision) {
   const sample = view.items[view.focus];
   if (!sample) return;
   if (!canReview) return say("Only curators accept or reject samples.", "error");
+  if (!allowedDecisions(sample.state).includes(decision)) {
+    return say(sample.state === "accepted" ? `Sample #${sample.id} is already accepted (Reject takes it out of the dataset).`
+      : `Sample #${sample.id} is rejected: its frame went back to the annotators, and comes back as a new sample.`);
+  }
   const reason = decision === "reject" ? await pickReason(`sample #${sample.id}`) : "";
   if (decision === "reject" && !reason) return focusTile();
   moveTo(view.focus + 1);  // on at once: the curator never waits for the server between two keys
@@ -114,10 +117,21 @@ function update(sample) {
 }
 
 function tally(sample) {
-  mine.set(sample.id, sample.state);
-  const count = (state) => [...mine.values()].filter((v) => v === state).length;
-  $("count-accepted").textContent = count("accepted");
-  $("count-rejected").textContent = count("rejected");
+  showCounts(rememberDecision(sample));
+}
+
+function showCounts({ accepted, rejected }) {
+  if (!canReview) return;
+  $("count-accepted").textContent = accepted;
+  $("count-rejected").textContent = rejected;
+}
+
+// The toolbar offers what the focused sample's state allows.
+function showActions() {
+  if (!canReview) return;
+  const allowed = allowedDecisions(view.items[view.focus]?.state);
+  $("accept").disabled = !allowed.includes("accept");
+  $("reject").disabled = !allowed.includes("reject");
 }
 
 // ---- focus and paging -------------------------------------------------------------------------
@@ -170,6 +184,7 @@ function paint() {
     node.classList.toggle("focused", i === view.focus);
     node.tabIndex = i === view.focus ? 0 : -1;
   });
+  showActions();
 }
 
 function renderTile(node, sample) {
@@ -255,4 +270,5 @@ function restore() {
 }
 
 const focusId = restore();
+showCounts(sessionCounts());
 enqueue(() => load(focusId));

@@ -6,14 +6,19 @@ API (``/api/v1/runs…``), which enforces the same roles.
 
 from __future__ import annotations
 
-from flask import Blueprint, abort, g, render_template, request, send_file
+from flask import Blueprint, Response, abort, g, render_template, request, send_file
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
 from dataset.models import IllusionType, Role, Video
-from dataset.services import training
+from dataset.readers import READER_FORMATS
+from dataset.services import run_logs, training
 from model import registry
+from model.fit import suggest_crop
+from model.presets import load_preset
+from webapp.api.blueprint import int_arg
 from webapp.auth import requires
+from webapp.redact import path_rewrites, redact
 from webapp.runtime import runtime
 
 bp = Blueprint("models", __name__)
@@ -24,9 +29,14 @@ bp = Blueprint("models", __name__)
 def runs() -> ResponseReturnValue:
     """Every run with its state and progress; admins also get the launch form."""
     videos = g.db.query(Video.id, Video.name).order_by(Video.id).all()
+    settings = runtime().settings
     return render_template("models.html", can_admin=current_user.allows(Role.admin), videos=videos,
                            illusion_types=list(IllusionType), kinds=training.SAMPLE_KINDS,
-                           default_split=training.DEFAULT_SPLIT)
+                           default_split=training.DEFAULT_SPLIT, formats=READER_FORMATS,
+                           roots=sorted(settings.dataset_roots), max_nproc=settings.train_max_nproc,
+                           gpu=settings.train_devices == "cuda",
+                           checkpoints=registry.named_checkpoints(g.db, settings.runs_dir),
+                           suggested_crop=suggest_crop(load_preset("lite"), training.smallest_accepted_image(g.db)))
 
 
 @bp.get("/models/runs/<int:run_id>")
@@ -58,3 +68,30 @@ def val_image(run_id: int, name: str) -> ResponseReturnValue:
     if not path.is_relative_to(root) or path.suffix != ".png" or not path.is_file():
         abort(404, f"run {run_id} has no validation image {name!r}")
     return send_file(path, mimetype="image/png", max_age=3600, conditional=True)
+
+
+@bp.get("/models/runs/<int:run_id>/log")
+@requires(Role.curator)
+def run_log(run_id: int) -> ResponseReturnValue:
+    """The tail of rank 0's log (``?lines=200``, at most 2000); server folders are rewritten out of
+    it like out of every JSON answer (``webapp/redact.py``)."""
+    training.get_run(g.db, run_id)
+    count = int_arg("lines", 200, minimum=1, maximum=2000)
+    return {"run": run_id, **run_logs.tail(training.run_dir(runtime().settings.runs_dir, run_id), count)}
+
+
+@bp.get("/models/runs/<int:run_id>/log.txt")
+@requires(Role.curator)
+def run_log_file(run_id: int) -> ResponseReturnValue:
+    """The whole of rank 0's log as a text file to download (every launch of the run, oldest first),
+    streamed, so its server folders are rewritten here, line by line."""
+    training.get_run(g.db, run_id)
+    settings = runtime().settings
+    directory = training.run_dir(settings.runs_dir, run_id)
+    if not run_logs.rank0_files(directory):
+        abort(404, f"run {run_id} has no log yet: its trainers have not started")
+    rewrites = path_rewrites(settings)
+    lines = (redact(line.encode(), rewrites) for line in run_logs.log_lines(directory))
+    return Response(lines, mimetype="text/plain",
+                    headers={"Content-Disposition": f'attachment; filename="run{run_id}_rank0.log"',
+                             "Cache-Control": "no-store"})
