@@ -169,6 +169,8 @@ class Video(Base):
     meta: Mapped[dict[str, Any]] = mapped_column(default=dict)
     created_by_id: Mapped[int | None] = mapped_column(ForeignKey("users.id", ondelete="SET NULL"))
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    scene_group: Mapped[int | None] = mapped_column(
+        doc="Id of the first video of its scene group (copies of one scene split together); None: its own.")
 
     frames: Mapped[list[Frame]] = relationship(back_populates="video", order_by="Frame.index", passive_deletes=True)
 
@@ -455,6 +457,8 @@ class AuditEntry(Base):
     """Every human decision: who, what, on which object, when."""
 
     __tablename__ = "audit_log"
+    # What was decided about one object (why a sample was rejected, for its annotator), without a scan.
+    __table_args__ = (Index("ix_audit_log_target", "target_kind", "target_id"),)
 
     id: Mapped[int] = mapped_column(primary_key=True)
     user_id: Mapped[int | None] = mapped_column(ForeignKey("users.id", ondelete="SET NULL"), index=True)

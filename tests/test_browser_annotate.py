@@ -165,12 +165,12 @@ def test_annotator_clicks_pairs_submits_and_a_second_annotator_works_alongside(b
         expect(page.locator("#type-dialog")).to_be_visible()
         expect(page.locator("#type-dialog .choice").first).to_be_focused()
         page.keyboard.press("Escape")  # a dismissed submit says why nothing happened
-        expect(page.locator("#message")).to_have_text(re.compile(r"^Not submitted: it needs an illusion type"))
+        expect(page.locator("#message")).to_have_text(re.compile(r"^Not submitted: plane 1 needs an illusion type"))
         page.keyboard.press("t")
         expect(page.locator("#type-dialog")).to_be_visible()
         page.keyboard.press("2")
-        expect(page.locator("#illusion-type")).to_have_value("picture")
-        # a pair may have a type of its own (a frame can hold a picture and a mirror)
+        expect(page.locator("#pairs [data-pair='1'] select.pair-type")).to_have_value("picture")
+        # each pair has a type of its own (a frame can hold a picture and a mirror), changed in its row
         page.select_option("#pairs [data-pair='1'] select.pair-type", "mirror")
         page.wait_for_function("() => window.annotator.pairs[0].type === 'mirror'")
         page.locator("#canvas").focus()
@@ -198,7 +198,7 @@ def test_annotator_clicks_pairs_submits_and_a_second_annotator_works_alongside(b
 
         saved = page.request.get(f"{url}/api/v1/frames/{frame['id']}").json()
         assert saved["submitted"] and saved["state"] in ("annotated", "generated")
-        assert saved["illusion_type"] == "picture"
+        assert saved["illusion_type"] == "mirror"  # the annotation's: its first plane's
         regions = {(r["pair"], r["kind"]): r for r in saved["regions"]}
         assert set(regions) == {(1, "illusion"), (1, "support")}
         assert {r["illusion_type"] for r in saved["regions"]} == {"mirror"}

@@ -135,6 +135,7 @@ def test_each_page_with_shortcuts_explains_them_under_question_mark(open_page, d
     page, errors = open_page("curator")
     help_dialog = page.locator("#keys-help")
     expected = {"/frames": ["next page", "open the frame"], "/jobs": ["next page (older jobs)"],
+                "/": ["passed the VLM prefilter"], "/ingest": ["scene group", "upload and ingest the chosen files"],
                 # Annotate's own table, every group of it, and its note
                 "/annotate/1": ["Segment", "include a point (green)", "Right-click Alt+Click", "Touch up",
                                 "Ctrl+Shift+Z Ctrl+Y", "View", "masks more / less opaque", "Frame",

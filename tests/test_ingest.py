@@ -165,7 +165,9 @@ def test_upload_validates_and_starts_an_ingest_job(client, runtime, tokens, tmp_
     job = response.json
     assert job["kind"] == "ingest" and job["params"]["original_name"] == "clip.avi"
     assert job["params"]["illusion_types"] == ["picture", "replay"]
-    assert Path(job["params"]["path"]).read_bytes() == data  # stored in the media store
+    # Stored in the media store, named relative to the workspace (answers carry no server path).
+    assert job["params"]["path"].startswith("media/")
+    assert (runtime.settings.home / job["params"]["path"]).read_bytes() == data
     for body, message in [({"file": (io.BytesIO(b"x"), "notes.txt")}, "not a video file name"),
                           ({}, "multipart field 'file'"),
                           ({"file": (io.BytesIO(data), "a.avi"), "fps": "fast"}, "fps must be a number"),

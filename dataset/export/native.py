@@ -29,7 +29,7 @@ ANNOTATIONS = "annotations"
 def export_native(records: list[SampleRecord], media: MediaStore, root: Path, *, spec: dict[str, float], seed: int,
                   progress: Progress) -> dict[str, Any]:
     """Write ``records`` under the (empty, staged) folder ``root``; returns counts per split."""
-    splits = {r.video_dir: split_of(r.video_dir, spec, seed) for r in records}
+    splits = {r.video_dir: split_of(r.scene or r.video_dir, spec, seed) for r in records}
     entries: list[dict[str, Any]] = []
     images: dict[str, list[tuple[SampleRecord, str]]] = {name: [] for name in spec}
     for done, record in enumerate(records, start=1):

@@ -32,7 +32,8 @@ class SampleRecord:
     """One sample with its frame and video; ``files`` holds media keys as in ``Sample.files``.
 
     ``video_dir`` is the video's folder in a native export ("" where a format has none);
-    ``created_at`` None means "now" on import.
+    ``scene`` what its split is drawn from: the folder of its scene group's first video (copies of
+    one scene share it), "" for ``video_dir``; ``created_at`` None means "now" on import.
     """
 
     video: VideoInfo
@@ -51,6 +52,7 @@ class SampleRecord:
     qa: dict[str, Any]
     created_at: datetime | None = None
     video_dir: str = ""
+    scene: str = ""
 
     @property
     def name(self) -> str:

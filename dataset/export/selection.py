@@ -3,7 +3,7 @@
 One sample per frame: among the samples in the chosen states, the one made from the newest
 annotation version (then the newest row). Videos get folder names that are stable across
 workspaces: a slug of the video's name, with a content-hash suffix only where two selected videos
-would share one.
+would share one. Copies of one video (a scene group) are split as the group's first video.
 """
 
 from __future__ import annotations
@@ -40,9 +40,10 @@ def select_samples(session: Session, states: Sequence[str] = DEFAULT_STATES,
     """
     chosen = Sample.state.in_([SampleState(s) for s in parse_states(states)])
     scope = [Video.id.in_(list(video_ids))] if video_ids else []
-    videos = session.execute(select(Video.content_sha256, Video.name).where(
+    videos = session.execute(select(Video.content_sha256, Video.name, Video.id, Video.scene_group).where(
         Video.id.in_(select(Frame.video_id).join(Sample, Sample.frame_id == Frame.id).where(chosen)), *scope)).all()
-    dirs = video_dirs(dict(videos))
+    dirs = video_dirs({sha: name for sha, name, *_ in videos})
+    scenes = _scenes(session, videos, dirs)
     query = (select(Sample, Frame, Video, Annotation.illusion_type)
              .join(Frame, Frame.id == Sample.frame_id).join(Video, Video.id == Frame.video_id)
              .outerjoin(Annotation, Annotation.frame_id == Frame.id).where(chosen, *scope)
@@ -52,14 +53,26 @@ def select_samples(session: Session, states: Sequence[str] = DEFAULT_STATES,
     items, last_frame = [], None
     for sample, frame, video, illusion_type in session.execute(query):
         if sample.frame_id != last_frame:
-            items.append(_item(dirs[video.content_sha256], sample, frame, video, illusion_type))
+            items.append(_item(dirs[video.content_sha256], scenes.get(video.id, ""), sample, frame, video, illusion_type))
             last_frame = sample.frame_id
     return sorted(items, key=lambda item: (item.video_dir, item.index))
 
 
-def _item(video_dir: str, sample: Sample, frame: Frame, video: Video, illusion_type: Any) -> SampleRecord:
+def _scenes(session: Session, videos: Sequence[Any], dirs: dict[str, str]) -> dict[int, str]:
+    """{video id: the folder its split is drawn from} for the videos in a scene group with others:
+    the folder of the group's first video (its name's slug when that one is not exported)."""
+    grouped = {row.id: row.scene_group for row in videos if row.scene_group is not None}
+    firsts = {row.id: dirs.get(row.content_sha256) or slug(row.name) for row in session.execute(
+        select(Video.id, Video.name, Video.content_sha256).where(Video.id.in_(set(grouped.values()))))}
+    # a first video deleted since: the group still splits together, under its smallest member's folder
+    fallback = {group: min(dirs[row.content_sha256] for row in videos if row.scene_group == group)
+                for group in set(grouped.values()) - set(firsts)}
+    return {video: firsts.get(group) or fallback[group] for video, group in grouped.items()}
+
+
+def _item(video_dir: str, scene: str, sample: Sample, frame: Frame, video: Video, illusion_type: Any) -> SampleRecord:
     return SampleRecord(
-        video_dir=video_dir,
+        video_dir=video_dir, scene=scene,
         video=VideoInfo(name=video.name, source_kind=video.source_kind.value, illusion_types=list(video.illusion_types),
                         content_sha256=video.content_sha256, fps=video.fps, width=video.width, height=video.height,
                         meta=dict(video.meta)),

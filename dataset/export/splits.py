@@ -1,4 +1,5 @@
-"""Train/test splits made by video, never by frame, so no video straddles two splits.
+"""Train/test splits made by video, never by frame, so no video straddles two splits; copies of one
+video (a scene group, see ``dataset.services.scene_groups``) are drawn as their group's first video.
 
 A video's split is a pure function of its name, the seed and the spec: a uniform number drawn from
 SHA-256(seed, name) falls into one of the cumulative fractions. Adding videos to a dataset never

@@ -1,10 +1,11 @@
 """Dataset versions: the accepted samples of the database pinned with their files' hashes, so a
-training run stays reproducible while curation goes on; splits by video; a reader over a version.
+training run stays reproducible while curation goes on; splits by scene group (copies of one video
+stay together); a reader over a version.
 
 A version is plain JSON (stored in a run's ``run.json``)::
 
     {"id": sha256 of the items, "created_at", "filters", "skipped": [{"sample_id", "reason"}],
-     "items": [{"sample_id", "frame_id", "frame_index", "video_id", "video_name",
+     "items": [{"sample_id", "frame_id", "frame_index", "video_id", "video_name", "scene_group",
                 "kind": "synthesized" | "capture", "illusion_types", "pair_types": {mask: type},
                 "qa_flags", "scale", "camera": {"fx", "baseline"} | null,
                 "files": {name: media key, "masks": {name: key}}, "hashes": {media key: sha256}}]}
@@ -35,6 +36,7 @@ from dataset.readers.base import Camera, ListedReader, StereoSample, invalidate,
 from dataset.readers.native import illusion_regions, pair_types, video_camera
 from dataset.samples import load_output
 from dataset.services.errors import InvalidInput
+from dataset.services.scene_groups import group_of
 
 KINDS = ("synthesized", "capture")
 _BATCH = 256  # rows fetched at a time: sample rows carry JSON blobs (files, qa, provenance)
@@ -56,7 +58,7 @@ def pin_dataset_version(session: Session, media: MediaStore, *, video_ids: Seque
     """
     filters = _filters(video_ids, illusion_types, kinds, qa_flags)
     videos = {row.id: row for row in session.execute(select(Video.id, Video.name, Video.source_kind, Video.illusion_types,
-                                                            Video.meta))}
+                                                            Video.meta, Video.scene_group))}
     items, skipped = [], []
     for row in _newest_accepted(session, filters["video_ids"]):
         item = _item(row, videos[row.video_id])
@@ -84,28 +86,37 @@ def version_counts(version: Mapping[str, Any]) -> dict[str, int]:
 
 
 def split_by_video(version: Mapping[str, Any], fractions: Mapping[str, float], seed: int) -> dict[str, list[int]]:
-    """{split: sorted sample ids}, whole videos to one split, in the shares of ``fractions``
-    (≥ 0, summing to 1). Every split with a share > 0 gets at least one video; fewer videos than
-    such splits is an :class:`InvalidInput` saying so. Deterministic: videos are ordered by
-    SHA-256 of ``<seed>:<video id>`` and dealt out in that order by largest remainders."""
+    """{split: sorted sample ids}, whole scene groups (a video and its copies; see
+    ``dataset.services.scene_groups``) to one split, in the shares of ``fractions`` (≥ 0, summing
+    to 1). Every split with a share > 0 gets at least one group; fewer groups than such splits is
+    an :class:`InvalidInput` saying so. Deterministic: groups are ordered by SHA-256 of
+    ``<seed>:<group>`` (the group of a video without copies is its id) and dealt out in that order
+    by largest remainders."""
     if not fractions or any(not (math.isfinite(f) and f >= 0) for f in fractions.values()) \
             or abs(sum(fractions.values()) - 1) > 1e-6:
         raise InvalidInput(f"split fractions must be ≥ 0 and sum to 1, got {dict(fractions)}")
-    videos = sorted({item["video_id"] for item in version["items"]},
-                    key=lambda v: hashlib.sha256(f"{seed}:{v}".encode()).hexdigest())
+    groups = sorted({_group(item) for item in version["items"]},
+                    key=lambda g: hashlib.sha256(f"{seed}:{g}".encode()).hexdigest())
     needed = [name for name, f in fractions.items() if f > 0]
-    if len(videos) < len(needed):
-        raise InvalidInput(f"the selection has {len(videos)} video(s) but {len(needed)} splits ({', '.join(needed)}) "
+    if len(groups) < len(needed):
+        videos = len({item["video_id"] for item in version["items"]})
+        copies = f" in {len(groups)} scene group(s) (copies of one scene split together)" if len(groups) < videos else ""
+        raise InvalidInput(f"the selection has {videos} video(s){copies} but {len(needed)} splits ({', '.join(needed)}) "
                            "each need one of their own: select more videos or fewer splits")
-    counts = _apportion(fractions, len(videos))
-    of_video, start = {}, 0
+    counts = _apportion(fractions, len(groups))
+    of_group, start = {}, 0
     for name, count in counts.items():
-        of_video.update({video: name for video in videos[start:start + count]})
+        of_group.update({group: name for group in groups[start:start + count]})
         start += count
     splits: dict[str, list[int]] = {name: [] for name in fractions}
     for item in version["items"]:
-        splits[of_video[item["video_id"]]].append(item["sample_id"])
+        splits[of_group[_group(item)]].append(item["sample_id"])
     return {name: sorted(ids) for name, ids in splits.items()}
+
+
+def _group(item: Mapping[str, Any]) -> int:
+    """An item's scene group; versions pinned before scene groups existed split by video."""
+    return item.get("scene_group", item["video_id"])
 
 
 def version_media_keys(version: Mapping[str, Any]) -> set[str]:
@@ -193,7 +204,7 @@ def _item(row: Any, video: Any) -> dict[str, Any]:
     camera = video_camera(video.meta) if capture else None
     return {
         "sample_id": row.id, "frame_id": row.frame_id, "frame_index": row.index, "video_id": row.video_id,
-        "video_name": video.name, "kind": "capture" if capture else "synthesized",
+        "video_name": video.name, "scene_group": group_of(video), "kind": "capture" if capture else "synthesized",
         "illusion_types": sorted(set(types.values()) or set(video.illusion_types)), "pair_types": types,
         "qa_flags": list(row.qa.get("flags", [])), "scale": float(row.params.get("scale", 1.0)),
         "camera": None if camera is None else {"fx": camera.fx, "baseline": camera.baseline},

@@ -19,6 +19,7 @@ from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.frames import get_frame, update_frame
 from dataset.services.leases import ensure_annotation_row, held_by_other, release_lease
+from dataset.services.sample_review import returned_note
 from dataset.services.validate import db_int
 
 ANNOTATABLE = (FrameState.approved,)
@@ -49,6 +50,7 @@ def frame_detail(session: Session, frame_id: int, user: User | Any) -> dict[str,
         "lease": {"mine": bool(ann and ann.lease_user_id == user.id and not held),
                   "held_by_other": held,
                   "expires": ann.lease_expires_at.isoformat() + "Z" if ann and ann.lease_expires_at else None},
+        "returned": returned_note(session, frame),
         "prev_id": ids[pos - 1] if pos > 0 else None,
         "next_id": ids[pos + 1] if 0 <= pos < len(ids) - 1 else None,
     }
@@ -59,8 +61,9 @@ def save_annotation(session: Session, frame_id: int, user: User | Any, *, versio
     """Save the regions as a draft, or submit them (the frame becomes ``annotated``).
 
     ``version`` is the annotation version the page loaded; anything else is a 409 and nothing is written.
-    A region may carry its pair's ``illusion_type`` (a frame can hold a picture and a mirror); a pair
-    without one gets ``illusion_type``, the annotation's.
+    The illusion type belongs to each pair (a frame can hold a picture and a mirror): a region carries
+    its pair's ``illusion_type``, and a pair without one gets ``illusion_type`` (a default for the
+    request's pairs). The annotation's own type is that default, else its first typed pair's.
     """
     frame = session.get(Frame, frame_id, with_for_update=True)
     if frame is None:
@@ -79,8 +82,11 @@ def save_annotation(session: Session, frame_id: int, user: User | Any, *, versio
     parsed = _parse_regions(regions, frame.height, frame.width, require_illusion=submit)
     for region in parsed:
         region.illusion_type = region.illusion_type or kind
-    if submit and (kind is None or any(r.illusion_type is None for r in parsed)):
-        raise InvalidInput("choose the illusion type (" + ", ".join(IllusionType) + ") before submitting")
+    untyped = sorted({r.pair for r in parsed if r.illusion_type is None})
+    if submit and untyped:
+        raise InvalidInput(f"choose the illusion type ({', '.join(IllusionType)}) of every pair before submitting "
+                           f"(pair {untyped[0]} has none)")
+    kind = kind or next((r.illusion_type for r in sorted(parsed, key=lambda r: r.pair) if r.illusion_type), None)
     # Compare-and-swap on the version: of two saves from the same version, exactly one wins.
     won = session.execute(update(Annotation).where(Annotation.id == ann.id, Annotation.version == version)
                           .values(version=Annotation.version + 1, user_id=user.id, illusion_type=kind,

@@ -12,7 +12,8 @@ from dataset.models import Frame, FrameCount, FrameState, Video, utcnow
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.paging import Page, keyset_page
 
-# Which states count as having reached each funnel stage (rejected/deleted frames drop out).
+# Which states count as having reached each funnel stage (rejected/deleted frames drop out; of the
+# rejected ones, those the prefilter rejected never passed it, see funnel_counts).
 _REACHED: dict[str, tuple[FrameState, ...]] = {
     "prefiltered": (FrameState.prefiltered, FrameState.approved, FrameState.rejected,
                     FrameState.annotated, FrameState.generated, FrameState.accepted),
@@ -22,15 +23,35 @@ _REACHED: dict[str, tuple[FrameState, ...]] = {
     "accepted": (FrameState.accepted,),
 }
 FUNNEL_STAGES = ("videos", "frames", *_REACHED)
+# What each count means, in the dashboard's words.
+FUNNEL_MEANINGS = {
+    "videos": "videos ingested",
+    "frames": "frames sampled from them (deleted frames not counted)",
+    "prefiltered": "frames that passed the VLM prefilter: kept, or left to a curator (its rejections not counted)",
+    "approved": "frames a curator approved on Review",
+    "annotated": "frames whose masks an annotator submitted",
+    "generated": "frames with a generated stereo sample",
+    "accepted": "frames whose sample a curator accepted: the dataset",
+}
 
 
 def funnel_counts(session: Session) -> dict[str, int]:
-    """How many videos, and frames that reached each stage of the pipeline (from the maintained counts)."""
-    by_state = dict(session.execute(select(FrameCount.state, func.sum(FrameCount.n)).group_by(FrameCount.state)).all())
+    """How many videos, and frames that reached each stage of the pipeline (from the maintained counts).
+
+    ``prefiltered`` counts the frames that passed the prefilter: kept, or left to a curator. A
+    rejected frame whose newest verdict is "drop" (keep 0) is the prefilter's rejection, not a pass.
+    """
+    by_state: dict[FrameState, int] = {}
+    dropped = 0
+    for state, keep, n in session.execute(select(FrameCount.state, FrameCount.keep, func.sum(FrameCount.n))
+                                          .group_by(FrameCount.state, FrameCount.keep)):
+        by_state[state] = by_state.get(state, 0) + n
+        dropped += n if state == FrameState.rejected and keep == 0 else 0
     counts = {"videos": session.scalar(select(func.count()).select_from(Video)) or 0,
               "frames": sum(n for s, n in by_state.items() if s != FrameState.deleted)}
     for stage, states in _REACHED.items():
         counts[stage] = sum(by_state.get(s, 0) for s in states)
+    counts["prefiltered"] -= dropped
     return counts
 
 

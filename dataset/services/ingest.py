@@ -3,7 +3,9 @@
 Idempotent and resumable: a video is keyed by its content hash and frames by (video, index), so
 a re-ingest of a finished video is a no-op and a retry after a crash picks up where it stopped,
 making the same sampling and de-duplication decisions. A source that turns out to be broken
-removes the partial video again, so a failed ingest leaves nothing behind in the database.
+removes the partial video again, so a failed ingest leaves nothing behind in the database. A video
+whose frames copy an earlier one's (re-encoded, resized, renamed) joins its scene group
+(:mod:`dataset.services.scene_groups`), and the job's result and log say so.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from dataset.models import Frame, IllusionType, SourceKind, Video
 from dataset.services.errors import InvalidInput
 from dataset.services.jobs import JobContext
 from dataset.services.prefilter import launch_prefilter
+from dataset.services.scene_groups import join_scene_group
 from dataset.thumbnails import put_thumbnail
 from dataset.wording import plural
 
@@ -90,6 +93,7 @@ def _ingest(ctx: JobContext, p: dict[str, Any]) -> dict[str, Any]:
 
     kept = new = dropped = 0
     last: int | None = None
+    hashes: list[int] = []  # of the kept frames: whether the video copies another is judged on them
     try:
         for frame in src.frames(p["fps"]):
             h = dhash(frame.rgb)
@@ -98,6 +102,7 @@ def _ingest(ctx: JobContext, p: dict[str, Any]) -> dict[str, Any]:
                 continue
             last = h
             kept += 1
+            hashes.append(h)
             if frame.index not in done:
                 _store_frame(ctx, video_id, frame, h)
                 new += 1
@@ -112,11 +117,15 @@ def _ingest(ctx: JobContext, p: dict[str, Any]) -> dict[str, Any]:
         # One transaction: a crash can't leave a complete video whose prefilter was never queued.
         video = s.get(Video, video_id)
         video.meta = {**video.meta, "ingest": "complete", "frames": kept, "dropped_duplicates": dropped}
+        copy_of = join_scene_group(s, video_id, hashes)
         jobs = launch_prefilter(s, ctx.env.submit, None, video_id=video_id) if p.get("prefilter") else []
     ctx.log(f"kept {plural(kept, 'frame')} ({new} new), dropped {plural(dropped, 'near-duplicate')}; "
             f"queued {plural(len(jobs), 'prefilter job')}")
+    if copy_of:
+        ctx.log(f"looks like a copy of video {copy_of['video_id']} (“{copy_of['video_name']}”; {copy_of['matched']} "
+                f"of {kept} frames alike): kept in the same scene group, so no split separates them")
     return {"video_id": video_id, "video_name": video_name, "frames": kept, "new_frames": new,
-            "dropped_duplicates": dropped}
+            "dropped_duplicates": dropped, **({"copy_of": copy_of} if copy_of else {})}
 
 
 def _store_frame(ctx: JobContext, video_id: int, frame: DecodedFrame, phash: int) -> None:

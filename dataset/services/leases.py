@@ -1,6 +1,8 @@
 """The annotation queue: leases on annotation rows, so one annotator at a time holds a frame.
 
-Leases expire unless the page renews them, so a closed tab frees the frame.
+Leases expire unless the page renews them, so a closed tab frees the frame. A frame a curator sent
+back (its sample rejected) goes first to the annotator who submitted it; others get it only when
+nothing else waits.
 """
 
 from __future__ import annotations
@@ -8,12 +10,12 @@ from __future__ import annotations
 from datetime import datetime, timedelta
 from typing import Any
 
-from sqlalchemy import or_, select, update
+from sqlalchemy import and_, or_, select, update
 from sqlalchemy.dialects.postgresql import insert as postgresql_insert
 from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 from sqlalchemy.orm import Session
 
-from dataset.models import Annotation, Frame, FrameState, User, utcnow
+from dataset.models import Annotation, Frame, FrameState, Sample, SampleState, User, utcnow
 from dataset.services.errors import Conflict
 from dataset.services.frames import get_frame
 
@@ -21,8 +23,9 @@ PREFETCH = 5  # frames ahead of an annotator whose embeddings workers prepare
 
 
 def next_frame(session: Session, user: User | Any, lease_s: int) -> tuple[Frame, datetime] | None:
-    """Lease the next approved, unsubmitted frame to ``user``: their held frame first, then the frame
-    after their last one in the same video, then the oldest free frame. Never one held by another."""
+    """Lease the next approved, unsubmitted frame to ``user``: their held frame first, then the frames
+    curators sent back to them, then the frame after their last one in the same video, then the
+    oldest free frame, and only then frames sent back to someone else. Never one held by another."""
     now = utcnow()
     held = session.scalar(select(Annotation).join(Frame).where(
         Annotation.lease_user_id == user.id, Annotation.lease_expires_at > now,
@@ -34,13 +37,19 @@ def next_frame(session: Session, user: User | Any, lease_s: int) -> tuple[Frame,
     candidates = (select(Frame).outerjoin(Annotation, Annotation.frame_id == Frame.id)
                   .where(Frame.state == FrameState.approved, free, or_(Annotation.id.is_(None),
                                                                        Annotation.submitted.is_(False))))
+    returned = select(Sample.id).where(Sample.frame_id == Frame.id, Sample.state == SampleState.rejected).exists()
+    theirs = and_(returned, Annotation.user_id.is_not(None), Annotation.user_id != user.id)
     last = session.scalar(select(Annotation).where(Annotation.user_id == user.id)
                           .order_by(Annotation.updated_at.desc()).limit(1))
-    ordered = []
+    # From the annotator's own annotations (an index), oldest sent back first; not a walk of every approved frame.
+    ordered = [select(Frame).join(Annotation, Annotation.frame_id == Frame.id)
+               .where(Annotation.user_id == user.id, Annotation.submitted.is_(False), Frame.state == FrameState.approved,
+                      free, returned).order_by(Annotation.updated_at)]
     if last is not None:
         video_id, index = session.execute(select(Frame.video_id, Frame.index).where(Frame.id == last.frame_id)).one()
-        ordered.append(candidates.where(Frame.video_id == video_id, Frame.index > index).order_by(Frame.index))
-    ordered.append(candidates.order_by(Frame.video_id, Frame.index))
+        ordered.append(candidates.where(~theirs, Frame.video_id == video_id, Frame.index > index).order_by(Frame.index))
+    ordered.append(candidates.where(~theirs).order_by(Frame.video_id, Frame.index))
+    ordered.append(candidates.where(theirs).order_by(Frame.video_id, Frame.index))
     for query in ordered:
         for frame in session.scalars(query.limit(20)):
             leased = _lease(session, frame.id, user, lease_s, now)

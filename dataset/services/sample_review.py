@@ -1,4 +1,5 @@
-"""Generated samples: listing them with their QA, and the curators' accept/reject decision."""
+"""Generated samples: listing them with their QA, the curators' accept/reject decision, and what a
+rejection says to the annotator the frame goes back to."""
 
 from __future__ import annotations
 
@@ -7,7 +8,18 @@ from typing import Any
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
-from dataset.models import Annotation, Frame, FrameState, Sample, SampleCount, SampleState, User, Video, utcnow
+from dataset.models import (
+    Annotation,
+    AuditEntry,
+    Frame,
+    FrameState,
+    Sample,
+    SampleCount,
+    SampleState,
+    User,
+    Video,
+    utcnow,
+)
 from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.frames import update_frame
@@ -71,7 +83,8 @@ def get_sample(session: Session, sample_id: int) -> dict[str, Any]:
 
 
 def review_sample(session: Session, sample_id: int, user: User | Any, decision: str, reason: str = "") -> Sample:
-    """Accept (the frame joins the dataset) or reject (its annotation goes back to annotators as a draft)."""
+    """Accept (the frame joins the dataset) or reject (its annotation goes back as a draft to the
+    annotator who submitted it, first in their queue, with the reason: :func:`returned_note`)."""
     if decision not in ("accept", "reject"):
         raise InvalidInput("decision must be accept or reject")
     if decision == "reject" and not reason.strip():
@@ -94,3 +107,23 @@ def review_sample(session: Session, sample_id: int, user: User | Any, decision: 
     audit.record(session, user.id, f"sample.{decision}", "sample", sample.id, reason=reason.strip(), frame_id=frame.id)
     session.flush()
     return sample
+
+
+def returned_note(session: Session, frame: Frame) -> dict[str, Any] | None:
+    """Why a curator sent ``frame`` back, while it waits for its annotator again: ``{"sample_id",
+    "reason", "by" (the curator), "at" (ISO 8601, UTC), "annotator"}``; None for any other frame."""
+    if frame.state != FrameState.approved:
+        return None
+    sample_id = newest_sample_id(session, frame.id)
+    if sample_id is None or session.get(Sample, sample_id).state != SampleState.rejected:
+        return None
+    row = session.execute(select(AuditEntry, User.name).outerjoin(User, User.id == AuditEntry.user_id)
+                          .where(AuditEntry.action == "sample.reject", AuditEntry.target_kind == "sample",
+                                 AuditEntry.target_id == sample_id)
+                          .order_by(AuditEntry.id.desc()).limit(1)).first()
+    annotator = session.scalar(select(User.name).join(Annotation, Annotation.user_id == User.id)
+                               .where(Annotation.frame_id == frame.id))
+    entry, curator = row if row else (None, None)
+    return {"sample_id": sample_id, "reason": entry.detail.get("reason", "") if entry else "",
+            "by": curator or "a curator", "at": entry.created_at.isoformat() + "Z" if entry else None,
+            "annotator": annotator}

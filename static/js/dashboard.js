@@ -1,5 +1,6 @@
-// Keeps the funnel counts live as frames move through the pipeline.
+// Keeps the funnel counts live as frames move through the pipeline; `?` says what each count means.
 import { api, poll } from "./api.js";
+import { keyboardHelp } from "./help.js";
 
 const funnel = document.getElementById("funnel");
 
@@ -12,3 +13,9 @@ poll(async () => {
     item.querySelector(".bar")?.style.setProperty("--w", `${(100 * counts[stage] / top).toFixed(1)}%`);
   }
 }, 5000);
+
+// No keys of its own: the help reads the counts (each row's title says it too, on hover).
+keyboardHelp([
+  ...[...funnel.querySelectorAll("li[data-stage]")].map((item) => [item.dataset.stage, item.title]),
+], { note: "The counts follow the pipeline live (every 5 s). A frame counts at every stage it has reached, "
+          + "so each bar is at most the one above it." });

@@ -1,6 +1,8 @@
 // Uploads videos one by one with a byte progress bar (XHR: fetch has no upload progress),
-// then follows each ingest job's progress until it finishes.
+// then follows each ingest job's progress until it finishes, saying when a video copies one
+// already in the workspace.
 import { api, el, poll } from "./api.js";
+import { keyboardHelp } from "./help.js";
 import { summary } from "./job_summary.js";
 import { failure, HEADERS } from "./request.js";
 import { sessionEnded } from "./session_ended.js";
@@ -35,6 +37,12 @@ function follow(job, row) {
     const done = ["succeeded", "failed", "interrupted"].includes(current.state);
     label.replaceChildren(el("a", { href: `${form.dataset.jobPage}${current.id}` }, `ingest job #${current.id}`),
                           `: ${current.state}${done ? ` — ${summary(current)}` : ""}`);
+    const copy = current.result?.copy_of;
+    if (copy) {
+      label.append(el("span", { className: "copy-note" },
+        `Looks like a copy of video ${copy.video_id} (“${copy.video_name}”; ${copy.matched} of ${copy.frames} frames `
+        + "alike): kept in the same scene group, so no split puts them on different sides."));
+    }
     if (done) {
       row.classList.toggle("failed", current.state !== "succeeded");
       stop();
@@ -64,7 +72,7 @@ async function uploadAll() {
   const fields = [...new FormData(form)].filter(([key]) => !["file", "prefilter"].includes(key));
   fields.push(["prefilter", form.elements.prefilter.checked ? "1" : "0"]);
   for (const file of files) {
-    const row = el("li", {}, el("span", { className: "name" }, file.name), el("progress", { max: 1, value: 0 }),
+    const row = el("li", {}, el("span", { className: "name", title: file.name }, file.name), el("progress", { max: 1, value: 0 }),
       el("span", { className: "status" }, "uploading…"));
     list.prepend(row);
     if (file.size > Number(form.dataset.maxBytes)) {
@@ -82,3 +90,15 @@ async function uploadAll() {
     }
   }
 }
+
+keyboardHelp([
+  ["`Enter` in a field", "upload and ingest the chosen files"],
+  ["Video files", "choose several at once: they upload one after another, each becoming an ingest job"],
+  ["Frames per second", "how many frames are kept per second of video (2, the paper's rate); near-duplicate "
+                        + "frames are dropped as well"],
+  ["Source", "where the videos come from (web, generated, real capture)"],
+  ["Illusion types", "what the videos show, kept with each video"],
+  ["Run the VLM prefilter", "ask the prefilter about every new frame, so curators review only what it keeps"],
+  ["A copy", "a video whose frames match one already here (re-encoded, resized or renamed) joins that video's "
+             + "scene group: training and export splits keep the two on one side"],
+], { note: "Each row below links to its job, whose page shows the full log." });

@@ -6,7 +6,7 @@ from flask import Blueprint, g, render_template, request
 from flask.typing import ResponseReturnValue
 
 from dataset.models import FrameState, Role, Video
-from dataset.services.frames import FUNNEL_STAGES, funnel_counts
+from dataset.services.frames import FUNNEL_MEANINGS, FUNNEL_STAGES, funnel_counts
 from dataset.services.validate import DB_INT_MAX
 from webapp.auth import requires
 
@@ -16,7 +16,7 @@ bp = Blueprint("dashboard", __name__)
 @bp.get("/")
 @requires(Role.annotator)
 def dashboard() -> ResponseReturnValue:
-    return render_template("dashboard.html", counts=funnel_counts(g.db), stages=FUNNEL_STAGES)
+    return render_template("dashboard.html", counts=funnel_counts(g.db), stages=FUNNEL_STAGES, meanings=FUNNEL_MEANINGS)
 
 
 @bp.get("/frames")

@@ -70,10 +70,11 @@ export function selectKind(kind) {
 
 export function addPair() {
   if (!editable()) return;
-  const [doc, id] = S.addPair(page.history.doc);
+  const type = S.pairOf(page.history.doc, ui.pair)?.type ?? null;
+  const [doc, id] = S.addPair(page.history.doc, type);
   selectPair(id, "illusion");
   commit(doc);
-  say(`Added ${planeName(id)}: click its illusion.`);
+  say(`Added ${planeName(id)}${type ? ` (${type}; T changes it)` : ""}: click its illusion.`);
 }
 
 export function removePair() {
@@ -89,17 +90,18 @@ export function clearRegion() {
   say(`Cleared the ${ui.kind} of ${planeName(ui.pair)} (Ctrl+Z brings it back).`);
 }
 
-// The frame's illusion type, or null; `pairId`: that plane's own type instead (null = the frame's).
-export function setType(type, pairId = null) {
+// A plane's illusion type (null: not chosen yet).
+export function setType(type, pairId = ui.pair) {
   if (!editable()) return;
-  const doc = page.history.doc;
-  commit(pairId == null ? { ...doc, type } : S.setPairType(doc, pairId, type));
+  commit(S.setPairType(page.history.doc, pairId, type));
 }
 
-// The type dialog (T, or a submit without a type); resolves to the type chosen, "" when cancelled.
-export async function pickType() {
+// The type dialog for a plane (T: the selected one; a submit: the first without a type); resolves
+// to the type chosen, "" when cancelled.
+export async function pickType(pairId = ui.pair) {
   if (!editable()) return "";
+  $("type-title").textContent = `Illusion type of ${planeName(pairId)}`;
   const type = await choose($("type-dialog"));
-  if (type) commit({ ...page.history.doc, type });
+  if (type) setType(type, pairId);
   return type;
 }

@@ -30,7 +30,7 @@ const SHORTCUTS = [
   { keys: ["o", "Shift+o"], show: ["O", "Shift+O"], does: "masks more / less opaque", command: "opacity", repeat: true },
   { keys: ["h"], show: ["H"], does: "hide / show the masks", command: "hide" },
   { group: "Frame" },
-  { keys: ["t"], show: ["T"], does: "illusion type", command: "pickType" },
+  { keys: ["t"], show: ["T"], does: "illusion type of the selected plane", command: "pickType" },
   { keys: ["Enter"], show: ["Enter"], does: "submit and take the next frame", command: "submit" },
   { keys: ["ArrowLeft", "ArrowRight"], show: ["←", "→"], does: "previous / next frame of the video", command: "step" },
   { keys: ["p"], show: ["P"], does: "propagate the current pair to the next frames", command: "propagate" },

@@ -104,16 +104,28 @@ async function open(id, how) {
   $("timing").textContent = "";
   view.setImage(image);
   banner(null);
+  showReturned(detail.returned);
   if (reason) readOnly(reason);
   else {
-    say(detail.regions.length ? `Draft loaded: ${plural(serverDoc.pairs.length, "plane")}.`
-                              : "Click inside the illusion: the flat thing that looks 3D.");
+    const draft = `Draft loaded: ${plural(serverDoc.pairs.length, "plane")}`;
+    if (detail.returned) say(`${draft}, sent back by ${detail.returned.by}: fix it and submit again.`);
+    else say(detail.regions.length ? `${draft}.` : "Click inside the illusion: the flat thing that looks 3D.");
     hold(serverDoc);
   }
   render();
   watchPreparing(detail);
   preloadNext(detail);
   root.dataset.state = "ready";
+}
+
+// A frame a curator sent back: who, when and why, above the stage.
+function showReturned(returned) {
+  $("returned").hidden = !returned;
+  if (!returned) return;
+  const to = returned.annotator === root.dataset.user || !returned.annotator ? "you" : returned.annotator;
+  const when = returned.at ? ` on ${new Date(returned.at).toLocaleString()}` : "";
+  $("returned-title").textContent = `Sent back to ${to} by ${returned.by}${when}, who rejected its sample:`;
+  $("returned-reason").textContent = returned.reason || "(no reason given)";
 }
 
 function readOnly(reason) {
@@ -209,6 +221,7 @@ async function showEmpty() {
   $("frame-title").textContent = "Annotate";
   $("frame-info").textContent = "";
   $("preparing").hidden = true;
+  $("returned").hidden = true;
   banner(null);
   saveState("");
   say("All caught up: no approved frames are waiting.");

@@ -38,7 +38,7 @@ const COMMANDS = {
   fit: () => view.fit(),
   opacity: (key) => setOpacity(prefs.opacity + (key === "o" ? 0.1 : -0.1)),
   hide: toggleMasks,
-  pickType,
+  pickType: () => pickType(),
   submit,
   step: (key) => stepFrame(key === "ArrowLeft" ? -1 : 1),
   propagate,

@@ -1,5 +1,5 @@
 // The side panel: region and tool switches, brush and opacity sliders, the planes with their
-// regions and types, the frame's type, and the frame's actions. Its controls act like their keys.
+// regions and types, and the frame's actions. Its controls act like their keys.
 import { el } from "../api.js";
 import { addPair, removePair, selectKind, selectPair, setType } from "./editing.js";
 import { checkQueue, stepFrame } from "./lifecycle.js";
@@ -17,9 +17,8 @@ export function renderPanel(doc) {
   $("brush-size-value").textContent = `${prefs.brush} px`;
   $("opacity").value = prefs.opacity;
   $("opacity-value").textContent = ui.hidden ? "hidden" : `${Math.round(prefs.opacity * 100)}%`;
-  $("illusion-type").value = doc?.type ?? "";
   const locked = !page.session;
-  for (const id of ["add-pair", "illusion-type", "propagate", "delete"]) $(id).disabled = locked;
+  for (const id of ["add-pair", "propagate", "delete"]) $(id).disabled = locked;
   $("submit").replaceChildren(page.frame && locked ? "Next from the queue " : "Submit ", el("kbd", {}, "Enter"));
   $("submit").disabled = !page.frame && root.dataset.state !== "empty";
   $("pairs").replaceChildren(...(doc?.pairs ?? []).map((p, i) => pairRow(p, i + 1)));
@@ -48,15 +47,16 @@ function pairRow(pair, n) {
                  ariaLabel: `Remove plane ${n}` }, "×"));
 }
 
-// The plane's own illusion type; the first option follows the frame's type.
+// The plane's illusion type, the types being the type dialog's choices.
 function pairType(pair, n) {
-  const options = [...$("illusion-type").options].filter((o) => o.value)
-    .map((o) => el("option", { value: o.value, selected: o.value === pair.type }, o.textContent));
+  const options = [...$("type-dialog").querySelectorAll("button.choice")]
+    .map((b) => el("option", { value: b.value, selected: b.value === pair.type }, b.value));
   return el("select", {
     className: "pair-type", ariaLabel: `Illusion type of plane ${n}`, disabled: !page.session,
+    title: "This plane's illusion type (T)", dataset: { chosen: pair.type ? "yes" : "no" },
     onclick: (event) => event.stopPropagation(),  // choosing a type is not selecting the plane
     onchange: (event) => setType(event.target.value || null, pair.id),
-  }, el("option", { value: "", selected: !pair.type }, "frame's type"), ...options);
+  }, el("option", { value: "", selected: !pair.type }, "type…"), ...options);
 }
 
 // Panel controls act like their keys, then hand the keyboard back to the canvas.
@@ -87,10 +87,6 @@ export function listenPanel() {
   });
   for (const b of document.querySelectorAll(".segmented [data-kind]")) onClick(b, () => selectKind(b.dataset.kind));
   for (const b of document.querySelectorAll(".tools [data-tool]")) onClick(b, () => setTool(b.dataset.tool));
-  $("illusion-type").addEventListener("change", (event) => {
-    setType(event.target.value || null);
-    $("canvas").focus({ preventScroll: true });
-  });
   $("opacity").addEventListener("input", (event) => setOpacity(Number(event.target.value)));
   $("brush-size").addEventListener("input", (event) => setBrush(Number(event.target.value)));
 }

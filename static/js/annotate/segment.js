@@ -37,6 +37,14 @@ async function segment({ pair, kind, region }) {
     return S.holds(page.history.doc, next);
   };
   if (!region.points.length && !region.box) return fresh(null);
+  // Only "not this" clicks and no mask yet: there is nothing to take them from. Said here, without
+  // asking the server (which would refuse it); the red dots stay for the first positive click.
+  if (!region.points.some((p) => p.label === 1) && !region.box && !region.area) {
+    fresh(null);
+    $("timing").textContent = "";
+    say("Start with a click inside the object: a right-click only takes away from a mask.");
+    return render();
+  }
   const body = { points: region.points.map((p) => [p.x, p.y]), labels: region.points.map((p) => p.label),
                  region_kind: kind };
   if (region.box) body.box = region.box;

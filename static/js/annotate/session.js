@@ -66,7 +66,7 @@ export class FrameSession {
   async send(doc, submit) {
     const { height, width } = this.frame;
     const res = await call(`${this.url}/annotation`, {
-      body: { version: this.version, regions: toServer(doc, height, width), illusion_type: doc.type, submit },
+      body: { version: this.version, regions: toServer(doc, height, width), submit },
     });
     if (res.ok) {
       this.version = res.data.annotation_version;

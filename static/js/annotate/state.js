@@ -1,7 +1,7 @@
 // The annotation of one frame as an immutable document, its undo history and its copy in this browser.
 //
-// doc    = { type: "picture" | … | null, pairs: [{ id, type, illusion: Region | null, support: Region | null }] }
-//          (a pair's type: null = the frame's; a frame can hold a picture and a mirror)
+// doc    = { pairs: [{ id, type: "picture" | … | null, illusion: Region | null, support: Region | null }] }
+//          (the illusion type belongs to each pair: a frame can hold a picture and a mirror)
 // Region = { runs: COCO runs (column-major) | null, area, points: [{x, y, label}], box: [x0, y0, x1, y1] | null,
 //            extra: other click entries kept as they came (e.g. {propagated_from}), stale: mask lags the clicks }
 // Every change makes a new doc that shares what did not change, so history is a list of docs and costs
@@ -15,7 +15,7 @@ export const colourOf = (pairId) => COLOURS[((pairId - 1) % COLOURS.length + COL
 
 const HISTORY_LIMIT = 200;
 
-const emptyDoc = () => ({ type: null, pairs: [{ id: 1, illusion: null, support: null }] });
+const emptyDoc = () => ({ pairs: [{ id: 1, type: null, illusion: null, support: null }] });
 
 export function region({ runs = null, points = [], box = null, extra = [], stale = false } = {}) {
   return { runs, area: runs ? areaOf(runs) : 0, points, box, extra, stale };
@@ -31,9 +31,10 @@ export function setPairType(doc, pairId, type) {
   return { ...doc, pairs: doc.pairs.map((p) => (p.id === pairId ? { ...p, type } : p)) };
 }
 
-export function addPair(doc) {
+// A new pair of the given type (the page passes the selected pair's).
+export function addPair(doc, type = null) {
   const id = Math.max(0, ...doc.pairs.map((p) => p.id)) + 1;
-  return [{ ...doc, pairs: [...doc.pairs, { id, illusion: null, support: null }] }, id];
+  return [{ ...doc, pairs: [...doc.pairs, { id, type, illusion: null, support: null }] }, id];
 }
 
 export function removePair(doc, pairId) {
@@ -101,12 +102,13 @@ function compressed(runs) {
   return counts.get(runs);
 }
 
+// A stored region without a type of its own (saved before pairs had one) takes the annotation's.
 export function fromServer(detail) {
-  const doc = { type: detail.illusion_type ?? null, pairs: [] };
+  const doc = { pairs: [] };
   for (const r of detail.regions) {
     let pair = pairOf(doc, r.pair);
     if (!pair) doc.pairs.push(pair = { id: r.pair, illusion: null, support: null, type: null });
-    if (r.illusion_type && r.illusion_type !== doc.type) pair.type = r.illusion_type;
+    pair.type ??= r.illusion_type ?? detail.illusion_type ?? null;
     const clicks = r.clicks ?? [];
     pair[r.kind] = region({
       runs: runsOf(r.mask),
@@ -116,7 +118,7 @@ export function fromServer(detail) {
     });
   }
   doc.pairs.sort((a, b) => a.id - b.id);
-  return doc.pairs.length ? doc : { ...emptyDoc(), type: doc.type };
+  return doc.pairs.length ? doc : emptyDoc();
 }
 
 // The regions the API stores: every region with a mask (an empty one says nothing).
@@ -136,7 +138,7 @@ export function toServer(doc, height, width) {
 const key = (frameId) => `illusion-studio:annotate:${frameId}`;
 
 export function storeDraft(frameId, base, doc, height, width) {
-  const draft = { base, savedAt: Date.now(), illusion_type: doc.type, regions: toServer(doc, height, width) };
+  const draft = { base, savedAt: Date.now(), regions: toServer(doc, height, width) };
   try {
     localStorage.setItem(key(frameId), JSON.stringify(draft));
   } catch (err) {

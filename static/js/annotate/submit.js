@@ -1,12 +1,12 @@
 // How a frame leaves the annotator's hands, and the next one comes from the queue: submitted once
-// every plane used has an illusion and the frame a type, or deleted with a reason.
+// every plane used has an illusion and a type, or deleted with a reason.
 import { choose } from "../dialogs.js";
 import { call } from "../request.js";
 import { sayFailure } from "../session_ended.js";
 import { editable, pickType, selectPair } from "./editing.js";
 import { checkQueue, fromQueue, navigate } from "./lifecycle.js";
 import { planeName, say } from "./messages.js";
-import { $, API, page } from "./page.js";
+import { $, API, page, ui } from "./page.js";
 import { masksArrived } from "./segment.js";
 import * as S from "./state.js";
 
@@ -23,8 +23,12 @@ export async function submit() {
     selectPair(noIllusion.id, "illusion");
     return say(`${planeName(noIllusion.id)} has a support region but no illusion: click the illusion.`, "error");
   }
-  if (!doc.type) {
-    if (!await pickType()) return say("Not submitted: it needs an illusion type (T, or Enter again to choose).", "error");
+  const untyped = used.find((p) => !p.type);
+  if (untyped) {
+    selectPair(untyped.id, ui.kind);
+    if (!await pickType(untyped.id)) {
+      return say(`Not submitted: ${planeName(untyped.id)} needs an illusion type (T, or Enter again to choose).`, "error");
+    }
     return submit();
   }
   const noSupport = used.filter((p) => !p.support?.area);
