@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import tomllib
 from pathlib import Path
 from typing import Any, Literal
@@ -20,6 +21,7 @@ from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, Settings
 ENV_PREFIX = "ILLUSION_STUDIO_"
 HOME_ENV = ENV_PREFIX + "HOME"
 SETTINGS_FILE = "illusion-studio.toml"
+_ROOT_NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")
 
 
 class SettingsError(ValueError):
@@ -46,9 +48,20 @@ class Settings(BaseSettings):
     # Security: server-side sessions, login and API-token throttling (limits' syntax: "10 per 15 minutes"), HTTPS.
     session_idle_minutes: int = Field(480, ge=1, description="A session unused this long ends.")
     session_lifetime_hours: int = Field(72, ge=1, description="A session ends this long after its login.")
-    login_limit_per_account: str = Field("10 per 15 minutes", description="Failed logins per user name.")
-    login_limit_per_address: str = Field("50 per 15 minutes", description="Failed logins per client address.")
-    token_limit_per_address: str = Field("50 per 15 minutes", description="Bad API tokens per client address.")
+    login_limit_per_account_address: str = Field(
+        "10 per 15 minutes", description="Failed logins for one user name from one address; past it that address gets "
+                                         "429 for that name, even with the right password.")
+    login_slowdown_per_account: str = Field(
+        "10 per 15 minutes", description="Failed logins for one user name from all addresses; past it its logins wait "
+                                         "(never refused).")
+    login_slowdown_per_address: str = Field(
+        "50 per 15 minutes", description="Failed logins from one address for all names; past it its logins wait "
+                                         "(never refused).")
+    login_slowdown_max_s: float = Field(4.0, ge=0, le=30, description="Longest wait of a slowed-down login; waits "
+                                                                       "start at 0.25 s and double per failure.")
+    token_limit_per_address: str = Field(
+        "50 per 15 minutes", description="Bad API tokens per client address; past it its bad tokens get 429 (a right "
+                                         "token always passes).")
     token_limit_per_account: str = Field(
         "10 per 15 minutes", description="Wrong secrets for one user's API tokens (tokens ist_<id>_<secret> name their "
                                          "user; old ist_<secret> ones only count per address).")
@@ -81,6 +94,18 @@ class Settings(BaseSettings):
     inpaint_backend: Literal["telea", "ns", "none", "lama"] = "telea"
     lama_model_path: Path | None = None
     device: str = Field("cpu", description="torch device for model backends: cpu, cuda, cuda:1 …")
+    # What the web may name and launch: dataset folders only inside these roots (by name), and
+    # training runs within what a train worker's machine holds (each worker checks its own again).
+    dataset_roots: dict[str, Path] = Field(
+        default_factory=dict, description="Dataset folders the web may name: {name: folder}; a request names "
+                                          "a root by name and a relative path inside it.")
+    train_max_nproc: int = Field(default_factory=lambda: os.cpu_count() or 1, ge=1, le=1024,
+                                 description="Most trainer processes a web launch may ask for.")
+    train_devices: Literal["cpu", "cuda"] = Field(
+        default_factory=lambda: _default_train_devices(),
+        description="What train workers have: cpu, or cuda (then cpu runs are allowed too).")
+    train_memory_gb: float = Field(default_factory=lambda: _machine_memory_gb(), gt=0,
+                                   description="Memory a run may use; launches estimated above it are refused.")
 
     @classmethod
     def settings_customise_sources(
@@ -94,8 +119,18 @@ class Settings(BaseSettings):
         # Init kwargs carry the TOML file's values, so the environment must rank above them.
         return env_settings, init_settings
 
-    @field_validator("login_limit_per_account", "login_limit_per_address", "token_limit_per_address",
-                     "token_limit_per_account")
+    @field_validator("dataset_roots")
+    @classmethod
+    def _roots(cls, value: dict[str, Path]) -> dict[str, Path]:
+        for name, folder in value.items():
+            if not _ROOT_NAME.fullmatch(name):
+                raise ValueError(f"dataset root name {name!r}: letters, digits, '-', '_' and '.' only")
+            if not folder.is_absolute():
+                raise ValueError(f"dataset root {name!r}: {folder} must be an absolute path")
+        return {name: folder.expanduser().resolve() for name, folder in value.items()}
+
+    @field_validator("login_limit_per_account_address", "login_slowdown_per_account", "login_slowdown_per_address",
+                     "token_limit_per_address", "token_limit_per_account")
     @classmethod
     def _rate_limit(cls, value: str) -> str:
         try:
@@ -132,6 +167,16 @@ class Settings(BaseSettings):
     def models_dir(self) -> Path:
         """The current model's pointer (``current.json``)."""
         return self.home / "models"
+
+
+def _machine_memory_gb() -> float:
+    """This machine's physical memory in GiB."""
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30
+
+
+def _default_train_devices() -> Literal["cpu", "cuda"]:
+    """cuda where an NVIDIA driver is present (without importing torch), else cpu."""
+    return "cuda" if Path("/proc/driver/nvidia/version").is_file() else "cpu"
 
 
 def load_settings(
@@ -182,7 +227,13 @@ def drop_settings_environment() -> list[str]:
 def write_settings_file(home: Path, **values: Any) -> None:
     """Write ``values`` as the data dir's settings file, which every process started on ``home`` reads
     (None values are left out: TOML has no null)."""
-    # TOML basic strings and arrays share JSON's syntax for the values settings take.
-    lines = [f"{key} = {json.dumps(str(value) if isinstance(value, Path) else value)}\n"
-             for key, value in values.items() if value is not None]
+    lines = [f"{key} = {_toml_value(value)}\n" for key, value in values.items() if value is not None]
     (home / SETTINGS_FILE).write_text("".join(lines), encoding="utf-8")
+
+
+def _toml_value(value: Any) -> str:
+    """TOML for the values settings take: basic strings and arrays share JSON's syntax; tables
+    (``dataset_roots``) are written inline."""
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{json.dumps(str(k))} = {_toml_value(v)}" for k, v in value.items()) + " }"
+    return json.dumps(str(value) if isinstance(value, Path) else value)

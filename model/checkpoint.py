@@ -1,13 +1,21 @@
 """Checkpoints: the whole config, the trainable (and LoRA) weights, the frozen backbones'
 content hashes and directories — never the backbones themselves — the step and ``extra``
-(the trainer's optimizer/scheduler/RNG/data position). Written atomically."""
+(the trainer's optimizer/scheduler/RNG/data position). Written atomically.
+
+Every load is ``torch.load(weights_only=True)``: a checkpoint holds tensors and plain values only,
+so a file that names any other Python object is refused instead of run. Files written before
+that rule (their ``extra.rng`` held numpy's RNG tuple) are converted once, from a shell, by
+:func:`upgrade_checkpoint` (``illusion-studio checkpoints upgrade``).
+"""
 
 from __future__ import annotations
 
 import io
+import pickle
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 
 from dataset.atomic import atomic_write_bytes
@@ -15,6 +23,11 @@ from model.network import FusionNetwork
 from model.presets import Config
 
 FORMAT = "illusion-studio-fusion/1"
+UPGRADE_HINT = "illusion-studio checkpoints upgrade [PATH | --all]"
+
+
+class UnsafeCheckpoint(ValueError):
+    """A file that ``weights_only`` loading refuses: a checkpoint of an older release, or a pickle."""
 
 
 def save_checkpoint(path: Path, network: FusionNetwork, config: Config, *, step: int,
@@ -28,33 +41,87 @@ def save_checkpoint(path: Path, network: FusionNetwork, config: Config, *, step:
     atomic_write_bytes(Path(path), buffer.getvalue())
 
 
-def load_checkpoint(path: Path, map_location: str = "cpu") -> dict[str, Any]:
-    """The raw payload; ValueError naming ``path`` when it is missing or not such a checkpoint."""
-    path = Path(path)
+def load_checkpoint(path: Path, map_location: str = "cpu", *, label: str | None = None) -> dict[str, Any]:
+    """The raw payload, loaded with ``weights_only=True``.
+
+    ``label`` names the file in messages (default: its path); callers serving the web pass a name
+    relative to the workspace. Messages never quote the file's bytes.
+    """
+    path, label = Path(path), label or str(path)
     if not path.is_file():
-        raise ValueError(f"checkpoint {path} does not exist")
+        raise ValueError(f"checkpoint {label} does not exist")
     try:
-        # Not weights_only: ``extra`` holds the trainer's optimizer and RNG states.
-        payload = torch.load(path, map_location=map_location, weights_only=False)
-    except Exception as exc:  # torch raises many kinds for a file that is not a checkpoint
-        raise ValueError(f"{path} is not a readable checkpoint: {type(exc).__name__}: {exc}") from None
+        payload = torch.load(path, map_location=map_location, weights_only=True)
+    except pickle.UnpicklingError:
+        # weights_only refuses any global it does not allow: an older checkpoint's numpy RNG
+        # state, or a pickle that would run code. Neither is loaded here.
+        raise UnsafeCheckpoint(
+            f"{label} holds Python objects beyond tensors and plain values and is not loaded: a checkpoint "
+            f"written before weights-only loading can be converted with `{UPGRADE_HINT}`") from None
+    except Exception:  # torch raises many kinds for a file that is not a checkpoint
+        raise ValueError(f"{label} is not a readable checkpoint") from None
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
-        raise ValueError(f"{path} is not an Illusion Studio fusion-model checkpoint")
+        raise ValueError(f"{label} is not an Illusion Studio fusion-model checkpoint")
     return payload
 
 
-def load_network(path: Path, device: str = "cpu") -> tuple[FusionNetwork, Config, dict[str, Any]]:
+def load_network(path: Path, device: str = "cpu", *,
+                 label: str | None = None) -> tuple[FusionNetwork, Config, dict[str, Any]]:
     """(network in eval mode on ``device``, its config, the raw payload). The network is built from
     the stored config; the frozen backbones load from the stored config's directories and must
     hash as they did at saving (ValueError naming the directory otherwise)."""
-    payload = load_checkpoint(path)
+    label = label or str(path)
+    payload = load_checkpoint(path, label=label)
     config = Config.from_dict(payload["config"])
     network = FusionNetwork(config.model)
     hashes = network.frozen_state_hashes()
     for name, expected in payload.get("frozen_hashes", {}).items():
         if hashes.get(name) != expected:
             directory = network.frozen_paths().get(name, "(none)")
-            raise ValueError(f"the {name} backbone in {directory} differs from the one checkpoint {path} "
+            raise ValueError(f"the {name} backbone in {directory} differs from the one checkpoint {label} "
                              "was trained with (content hash mismatch)")
     network.load_trainable_state_dict(payload["state"])
     return network.to(device).eval(), config, payload
+
+
+def weights_finite(payload: dict[str, Any]) -> bool:
+    """Whether every floating-point weight of a loaded checkpoint is finite (a diverged run's are not)."""
+    return all(bool(torch.isfinite(t).all()) for t in payload.get("state", {}).values()
+               if isinstance(t, torch.Tensor) and t.is_floating_point())
+
+
+def plain_value(value: Any) -> Any:
+    """``value`` with numpy arrays as tensors and numpy scalars as Python numbers, recursively:
+    what ``weights_only`` loading accepts."""
+    if isinstance(value, np.ndarray):
+        return torch.from_numpy(np.ascontiguousarray(value))
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, dict):
+        return {k: plain_value(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        converted = [plain_value(v) for v in value]
+        return converted if isinstance(value, list) else tuple(converted)
+    return value
+
+
+def upgrade_checkpoint(path: Path) -> bool:
+    """Rewrite an older checkpoint at ``path`` (atomically) so that it loads with ``weights_only``;
+    False when it already does. CLI only: this unpickles the file, so only its owner, from a
+    shell, may point it at one. ValueError when the file is not an Illusion Studio checkpoint."""
+    path = Path(path)
+    try:
+        load_checkpoint(path)
+        return False
+    except UnsafeCheckpoint:
+        pass
+    payload = torch.load(path, map_location="cpu", weights_only=False)
+    if not isinstance(payload, dict) or payload.get("format") != FORMAT:
+        raise ValueError(f"{path} is not an Illusion Studio fusion-model checkpoint")
+    buffer = io.BytesIO()
+    torch.save(plain_value(payload), buffer)
+    data = buffer.getvalue()
+    torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)  # refuses before anything is replaced
+    atomic_write_bytes(path, data)
+    return True
+

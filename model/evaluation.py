@@ -4,124 +4,200 @@ test split of the database), which methods, and the report folder it writes."""
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from sqlalchemy.orm import Session
 
 from dataset.db import transaction
 from dataset.formats import read_pfm
-from dataset.readers import READER_FORMATS, StereoSample, open_reader, resize_sample
+from dataset.readers import StereoSample, open_reader, resize_sample
 from dataset.readers.version import VersionReader
-from dataset.services import evaluations
+from dataset.services import evaluations, training
+from dataset.services.dataset_roots import resolve_folder
+from dataset.services.errors import InvalidInput, NotFound
+from dataset.services.evaluations import checkpoint_label, dataset_label
 from dataset.services.jobs import JobContext
-from model.align import ALIGN_RULES
+from model import registry
 from model.evaluate import DEFAULT_THRESHOLDS, RESOLUTIONS, EvalOptions, evaluate, iter_reader
-from model.methods import NETWORK_METHODS, Mono, NetworkRuns, SgbmParams, build_methods, method_key
+from model.launch import EvaluationLaunch, FieldError, FolderRef
+from model.methods import NETWORK_METHODS, Mono, NetworkRuns, SgbmParams, build_methods
 from model.report import PredictionWriter, ranked_samples, write_pictures, write_report
 
 DEFAULT_METHODS = ("fusion", "stereo", "mono_gt_align", "sgbm")
 PICTURED = 3  # worst and best samples shown with pictures
 
 
-def run_of_checkpoint(checkpoint: Path) -> Path | None:
-    """The training run folder a checkpoint belongs to (``RUN_DIR/checkpoints/x.pt``), if any."""
-    run_dir = checkpoint.resolve().parent.parent
-    return run_dir if (run_dir / "run.json").is_file() else None
+@dataclass(frozen=True)
+class EvalShellOptions:
+    """What only the command line may add to an evaluation (its user has a shell): server paths."""
+
+    data_dir: Path | None = None
+    data_format: str | None = None
+    checkpoint: Path | None = None
+    predictions: Path | None = None
+    mono: Path | None = None
+    out: Path | None = None
+    reader_options: dict[str, Any] = field(default_factory=dict)
+    thresholds: tuple[float, ...] = DEFAULT_THRESHOLDS
 
 
-def evaluation_params(*, data: str | Path | None, format: str | None, methods: list[str],
-                      out: str | Path | None = None,
-                      checkpoint: str | Path | None = None, predictions: str | Path | None = None,
-                      mono: str | Path | None = None, resolution: str | None = None, align: str = "lsq",
-                      max_disparity: int | None = None, kitti_png: bool = False, iters: int | None = None,
-                      thresholds: tuple[float, ...] = DEFAULT_THRESHOLDS, run_dir: str | Path | None = None,
-                      reader_options: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Validated parameters of an ``evaluate`` job; ValueError with a one-line reason.
+def evaluation_params(request: EvaluationLaunch, settings: Any, session: Session,
+                      shell: EvalShellOptions | None = None) -> dict[str, Any]:
+    """The ``evaluate`` job's parameters from a validated launch; FieldError naming the field.
 
-    Without ``data`` the samples are the held-out test split of the training run ``run_dir`` (or of
-    the run ``checkpoint`` belongs to) — samples its training never read. Without ``out`` the
-    report goes to ``<data dir>/evaluations/<job id>``.
+    Names stay names (``{"run", "file", "step"}`` for a checkpoint, ``{"root", "path"}`` for a
+    folder in a registered dataset root), resolved again when the job runs; only the command line
+    puts paths (``{"dir"}``, ``{"path"}``) here. A checkpoint named ``best`` or ``last`` is pinned
+    to the step it resolves to now, kept from rotation, so it cannot change or vanish while the job
+    waits. Without a dataset folder the samples are the held-out test split of ``run`` (default:
+    the checkpoint's run) — samples its training never read.
     """
-    keys = [method_key(m) for m in methods] or list(DEFAULT_METHODS)
-    if len(set(keys)) != len(keys):
-        raise ValueError("a method is named twice")
-    if any(k in NETWORK_METHODS for k in keys) and checkpoint is None:
-        raise ValueError("fusion, stereo and mono-align need --checkpoint (or a promoted current model)")
-    if checkpoint is not None and not Path(checkpoint).is_file():
-        raise ValueError(f"checkpoint {checkpoint} does not exist")
-    if "predictions" in keys and (predictions is None or not Path(predictions).is_dir()):
-        raise ValueError("the predictions method needs --predictions DIR (an existing folder)")
-    if mono is not None and not Path(mono).is_dir():
-        raise ValueError(f"--mono {mono} is not a folder")
-    if align not in ALIGN_RULES:
-        raise ValueError(f"--align must be one of {', '.join(ALIGN_RULES)}")
-    if data is not None:
-        if format not in READER_FORMATS:
-            raise ValueError(f"--format must be one of {', '.join(READER_FORMATS)}")
-        if not Path(data).is_dir():
-            raise ValueError(f"--data {data} is not a folder")
+    shell = shell or EvalShellOptions()
+    checkpoint = _checkpoint_param(request, settings, session, shell)
+    data = _folder_param(request.data, shell.data_dir, settings, "data")
+    run = request.run
+    if data is None:
+        run = run or (checkpoint or {}).get("run")
+        if run is None:
+            raise FieldError("run", "choose a run whose held-out test split to evaluate on, or a dataset folder")
+        _test_split(settings, session, run)
+    if "predictions" in request.methods and request.predictions is None and shell.predictions is None:
+        raise FieldError("predictions", "the predictions method needs a predictions folder")
+    resolution = request.resolution or ("quarter" if (request.data and request.data.format == "booster")
+                                        or shell.data_format == "booster" else "full")
+    return {"data": data, "format": (request.data.format if request.data else shell.data_format) if data else "database",
+            "methods": list(request.methods), "out": str(shell.out.resolve()) if shell.out else None,
+            "checkpoint": checkpoint, "run": run,
+            "predictions": _folder_param(request.predictions, shell.predictions, settings, "predictions"),
+            "mono": _folder_param(request.mono, shell.mono, settings, "mono"), "resolution": resolution,
+            "align": request.align, "max_disparity": request.max_disparity, "kitti_png": request.kitti_png,
+            "iters": request.iters, "thresholds": [float(t) for t in shell.thresholds],
+            "reader_options": dict(shell.reader_options)}
+
+
+def _checkpoint_param(request: EvaluationLaunch, settings: Any, session: Session,
+                      shell: EvalShellOptions) -> dict[str, Any] | None:
+    if not request.needs_network:
+        return None
+    if shell.checkpoint is not None:
+        return {"path": str(shell.checkpoint.resolve())}
+    if request.checkpoint is not None:
+        run_id, which = request.checkpoint.run, request.checkpoint.checkpoint
     else:
-        run_dir = Path(run_dir) if run_dir else (run_of_checkpoint(Path(checkpoint)) if checkpoint else None)
-        if run_dir is None or not (Path(run_dir) / "run.json").is_file():
-            raise ValueError("without --data, evaluation uses a training run's test split: pass --run RUN, "
-                             "a checkpoint of a run, or promote a run")
-    resolution = resolution or ("quarter" if format == "booster" else "full")
-    if resolution not in RESOLUTIONS:
-        raise ValueError(f"--resolution must be one of {', '.join(RESOLUTIONS)}")
-    if max_disparity is not None and max_disparity <= 0:
-        raise ValueError("--max-disparity must be positive")
-    absolute = lambda p: str(Path(p).absolute()) if p is not None else None
-    return {"data": absolute(data), "format": format if data is not None else "database",
-            "methods": keys, "out": absolute(out), "checkpoint": absolute(checkpoint),
-            "predictions": absolute(predictions), "mono": absolute(mono), "resolution": resolution,
-            "align": align, "max_disparity": max_disparity, "kitti_png": bool(kitti_png), "iters": iters,
-            "thresholds": [float(t) for t in thresholds], "run_dir": absolute(run_dir),
-            "reader_options": dict(reader_options or {})}
+        current = registry.current_reference(settings)
+        if current is None:
+            outside = registry.current_checkpoint(settings)
+            if outside is None:
+                raise FieldError("checkpoint", "fusion, stereo and mono-align need a checkpoint: name a run's, "
+                                               "or promote a run to the current model")
+            return {"path": str(outside)}
+        run_id, which = current
+    try:
+        run = training.get_run(session, run_id)
+        found = registry.run_checkpoint(settings.runs_dir, run.id, which, best_step=run.best_step)
+    except NotFound as exc:
+        raise FieldError("checkpoint", str(exc)) from None
+    pinned = registry.pin(found)
+    return {"run": pinned.run, "file": pinned.name, "step": pinned.step}
 
 
-def open_samples(params: dict[str, Any], media_root: Path) -> Any:
+def _folder_param(ref: FolderRef | None, path: Path | None, settings: Any, field_name: str) -> dict[str, str] | None:
+    if ref is not None:
+        try:
+            resolve_folder(settings.dataset_roots, ref.root, ref.path)
+        except InvalidInput as exc:
+            raise FieldError(field_name, str(exc)) from None
+        return {"root": ref.root, "path": ref.path}
+    return {"dir": str(path.resolve())} if path is not None else None
+
+
+def _test_split(settings: Any, session: Session, run_id: int) -> list[Any]:
+    """The run's held-out test split (sample ids); FieldError when there is none to evaluate."""
+    try:
+        training.get_run(session, run_id)
+    except NotFound as exc:
+        raise FieldError("run", str(exc)) from None
+    path = training.run_dir(settings.runs_dir, run_id) / "run.json"
+    if not path.is_file():
+        raise FieldError("run", f"run {run_id} has no run.json")
+    test = json.loads(path.read_text())["splits"].get("test") or []
+    if not test:
+        raise FieldError("run", f"run {run_id} has an empty test split: launch a run with a test share")
+    return test
+
+
+def folder_of(ref: dict[str, str] | None, settings: Any) -> Path | None:
+    """A folder parameter's path on this machine (a registered root's folder is resolved again)."""
+    if ref is None:
+        return None
+    if "dir" in ref:
+        return Path(ref["dir"])
+    return resolve_folder(settings.dataset_roots, ref["root"], ref.get("path", ""))
+
+
+def checkpoint_of(ref: dict[str, Any] | None, settings: Any) -> Path | None:
+    """A checkpoint parameter's file: a run's checkpoint by name (never a link), or the command line's path."""
+    if ref is None:
+        return None
+    if "path" in ref:
+        return Path(ref["path"])
+    found = next((f for f in registry.run_checkpoints(settings.runs_dir, int(ref["run"])) if f.name == ref["file"]),
+                 None)
+    if found is None:
+        raise ValueError(f"run {ref['run']} no longer has checkpoint {ref['file']}")
+    return found.path
+
+
+def open_samples(params: dict[str, Any], settings: Any) -> Any:
     """The reader the parameters name: a dataset folder, or a run's test split of the database."""
-    if params["data"] is not None:
-        return open_reader(params["format"], Path(params["data"]), **params["reader_options"])
-    run = json.loads((Path(params["run_dir"]) / "run.json").read_text())
+    folder = folder_of(params["data"], settings)
+    if folder is not None:
+        return open_reader(params["format"], folder, **params["reader_options"])
+    run = json.loads((training.run_dir(settings.runs_dir, int(params["run"])) / "run.json").read_text())
     test_ids = run["splits"].get("test", [])
     if not test_ids:
-        raise ValueError(f"run {params['run_dir']} has an empty test split")
-    return VersionReader(run["dataset"], media_root, sample_ids=test_ids)
+        raise ValueError(f"run {params['run']} has an empty test split")
+    return VersionReader(run["dataset"], settings.media_root, sample_ids=test_ids)
 
 
 def evaluate_job(ctx: JobContext) -> dict[str, Any]:
     """Job ``evaluate`` (params from :func:`evaluation_params`): writes the report folder, returns
     the headline table (per method and region: EPE, bad-2) and where the report is. The job's
     ``evaluations`` row gets that summary and, for database samples, per-sample results."""
-    p = ctx.params
-    out = Path(p["out"]) if p["out"] else Path(ctx.settings.home) / "evaluations" / str(ctx.job_id)
+    p, settings = ctx.params, ctx.settings
+    out = Path(p["out"]) if p["out"] else Path(settings.home) / "evaluations" / str(ctx.job_id)
     with transaction(ctx.sessions) as s:
         evaluation_id = evaluations.evaluation_for_job(s, ctx.job_id, p).id
-    reader = open_samples(p, ctx.settings.media_root)
-    ctx.log(f"{len(reader)} samples ({p['format']}), methods {', '.join(p['methods'])}, {p['resolution']} resolution")
-    mono_dir = Path(p["mono"]) if p["mono"] else None
-    runs = (NetworkRuns(Path(p["checkpoint"]), ctx.settings.device, Mono(mono_dir), p["iters"])
-            if p["checkpoint"] and any(m in NETWORK_METHODS for m in p["methods"]) else None)
+    reader = open_samples(p, settings)
+    label = dataset_label(p)
+    ctx.log(f"{len(reader)} samples of {label} ({p['format']}), methods {', '.join(p['methods'])}, "
+            f"{p['resolution']} resolution")
+    mono_dir, checkpoint = folder_of(p["mono"], settings), checkpoint_of(p["checkpoint"], settings)
+    runs = (NetworkRuns(checkpoint, settings.device, Mono(mono_dir), p["iters"], label=checkpoint_label(p["checkpoint"]))
+            if checkpoint and any(m in NETWORK_METHODS for m in p["methods"]) else None)
     methods = build_methods(
-        p["methods"], checkpoint=Path(p["checkpoint"]) if p["checkpoint"] else None,
-        predictions=Path(p["predictions"]) if p["predictions"] else None, mono_dir=mono_dir, align_rule=p["align"],
-        sgbm=SgbmParams(max_disparity=p["max_disparity"]), device=ctx.settings.device, iters=p["iters"], runs=runs)
+        p["methods"], checkpoint=checkpoint, predictions=folder_of(p["predictions"], settings), mono_dir=mono_dir,
+        align_rule=p["align"], sgbm=SgbmParams(max_disparity=p["max_disparity"]), device=settings.device,
+        iters=p["iters"], runs=runs)
     writer = PredictionWriter(out, kitti_png=p["kitti_png"])
     seen = SeenSamples(writer, runs)
     report = evaluate(
         iter_reader(reader), methods,
         EvalOptions(resolution=p["resolution"], thresholds=tuple(p["thresholds"])),
-        total=len(reader), dataset=p["data"] or f"test split of {p['run_dir']}",
+        total=len(reader), dataset=label,
         on_progress=lambda i, n: ctx.progress(0.95 * i / n),
         on_prediction=seen, on_failure=lambda s, m, why: ctx.log(f"skipped {s} {m}: {why}"))
-    report["params"] = {k: p[k] for k in ("format", "checkpoint", "align", "max_disparity", "iters", "run_dir")}
+    report["params"] = {"format": p["format"], "checkpoint": checkpoint_label(p["checkpoint"]), "align": p["align"],
+                        "max_disparity": p["max_disparity"], "iters": p["iters"], "run": p["run"]}
     if "sgbm" in p["methods"]:
         report["sgbm"] = SgbmParams(max_disparity=p["max_disparity"]).__dict__
     pictures = _pictures(out, reader, report, writer)
-    write_report(out, report, pictures)
-    result = {"out": str(out), "evaluation": evaluation_id, "samples": report["samples"],
+    write_report(out, report, pictures, writer.labels)
+    shown = _shown_path(out, settings)
+    result = {"out": shown, "evaluation": evaluation_id, "samples": report["samples"],
               "failed": len(report["failed"]), "pictures": pictures,
               "headline": {m: {r: {k: d["regions"][r].get(k) for k in ("epe", "bad2")} for r in d["regions"]}
                            for m, d in report["methods"].items()}}
@@ -129,8 +205,15 @@ def evaluate_job(ctx: JobContext) -> dict[str, Any]:
         evaluation = evaluations.get_evaluation(s, evaluation_id)
         rows = evaluations.record_results(s, evaluation, report, result, out, seen.sample_ids, seen.predictions)
         evaluation.summary = {**result, "database_rows": rows}
-    ctx.progress(1.0, f"report in {out}/index.html; {len(report['failed'])} failures; {rows} database results")
+    ctx.progress(1.0, f"report in {shown}/index.html; {len(report['failed'])} failures; {rows} database results")
     return result
+
+
+def _shown_path(path: Path, settings: Any) -> str:
+    """A path as answers show it: relative to the workspace, else the folder's name."""
+    home = Path(settings.home).resolve()
+    path = path.resolve()
+    return str(path.relative_to(home)) if path.is_relative_to(home) else path.name
 
 
 class SeenSamples:

@@ -100,11 +100,12 @@ def prediction_path(directory: Path, sample: StereoSample) -> Path:
 class NetworkRuns:
     """One forward pass of a fusion checkpoint per sample, shared by fusion, stereo and mono_align."""
 
-    def __init__(self, checkpoint: Path, device: str, mono: Mono, iters: int | None) -> None:
+    def __init__(self, checkpoint: Path, device: str, mono: Mono, iters: int | None, *,
+                 label: str | None = None) -> None:
         from model.checkpoint import load_network
         from model.predictor import Predictor
 
-        network, config, _payload = load_network(checkpoint, device)
+        network, config, _payload = load_network(checkpoint, device, label=label)
         self.predictor = Predictor(network, config, device)
         self.config = config
         self.mono, self.iters = mono, iters

@@ -4,7 +4,6 @@ embeddings → flow confidence → global fusion."""
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -49,10 +48,7 @@ class FusionNetwork(nn.Module):
         condition_dim = self.vlm.dim if self.vlm is not None else 0
         self.confidence = ConfidenceHead(config, condition_dim)
         self.fusion = GlobalFusion(config, config.hidden_dims[0])
-        multiples = [2 ** (config.n_downsample + 2), 2**config.token_downsample]
-        if config.use_vlm and config.vlm_backend == "lite":
-            multiples.append(config.vlm_patch)
-        self.size_multiple = math.lcm(*multiples)
+        self.size_multiple = config.size_multiple
         self._hashes: dict[str, str] | None = None
 
     def forward(self, left: Tensor, right: Tensor, mono: Tensor | None = None, *, iters: int,

@@ -8,6 +8,7 @@ An empty path in a preset file means "none".
 from __future__ import annotations
 
 import dataclasses
+import math
 import tomllib
 import types
 import typing
@@ -67,6 +68,15 @@ class ModelConfig:
     # Inference on a larger pair runs on it shrunk to this many pixels (0: never), the disparity
     # scaled back up: what keeps the CPU-sized preset within its time budget at 1080p.
     max_inference_pixels: int = 0
+
+    @property
+    def size_multiple(self) -> int:
+        """What both image sides must be a multiple of, in pixels: the GRU's coarsest level, the
+        flow's tokens and the lite VLM's patches all tile the image exactly."""
+        multiples = [2 ** (self.n_downsample + 2), 2**self.token_downsample]
+        if self.use_vlm and self.vlm_backend == "lite":
+            multiples.append(self.vlm_patch)
+        return math.lcm(*multiples)
 
     def __post_init__(self) -> None:
         if self.n_downsample not in (2, 3):

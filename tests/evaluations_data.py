@@ -12,11 +12,12 @@ import numpy as np
 from dataset.atomic import atomic_write_bytes
 from dataset.db import transaction
 from dataset.formats import write_pfm
-from dataset.models import Sample
+from dataset.models import Sample, TrainingRun
 from dataset.readers.version import pin_dataset_version
 from dataset.services import jobs as job_service
 from dataset.services import training
-from model.evaluation import evaluation_params
+from model.evaluation import EvalShellOptions, evaluation_params
+from model.launch import EvaluationLaunch, validate
 from tests.runs_data import DISPARITY, H, W, add_accepted_samples
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime
@@ -33,7 +34,12 @@ def evaluated_database(rt: Runtime, tmp: Path, videos: int = 3) -> tuple[int, li
         lefts = {sid: s.get(Sample, sid).files["left"] for sid in ids}
         for sid in ids:  # the sample page reads the generator's QA figures
             s.get(Sample, sid).qa = {"flags": [], "hole_fraction": 0.0}
-    run_dir = training.run_dir(rt.settings.runs_dir, 1)
+        run = TrainingRun(preset="lite", config={}, dataset_id=version["id"], dataset=version,
+                          splits={"train": [], "val": [], "test": ids}, launch={})
+        s.add(run)
+        s.flush()
+        run_id = run.id
+    run_dir = training.run_dir(rt.settings.runs_dir, run_id)
     atomic_write_bytes(run_dir / "run.json", json.dumps(
         {"config": {}, "dataset": version, "splits": {"train": [], "val": [], "test": ids},
          "media_root": str(rt.settings.media_root), "init_checkpoint": None, "data": {"format": "database"}}).encode())
@@ -42,9 +48,9 @@ def evaluated_database(rt: Runtime, tmp: Path, videos: int = 3) -> tuple[int, li
         path = predictions / Path(lefts[sid]).with_suffix(".pfm")
         path.parent.mkdir(parents=True, exist_ok=True)
         write_pfm(path, np.full((H, W), DISPARITY + k * STEP_PX, np.float32))
-    params = evaluation_params(data=None, format=None, methods=["predictions", "sgbm"], predictions=predictions,
-                               run_dir=run_dir, out=tmp / "report")
+    request = validate(EvaluationLaunch, {"methods": ["predictions", "sgbm"], "run": run_id})
     with transaction(rt.sessions) as s:
+        params = evaluation_params(request, rt.settings, s, EvalShellOptions(predictions=predictions, out=tmp / "report"))
         job_id = job_service.create_job(s, "evaluate", params, None).id
     assert job_service.execute_job(job_id, {"evaluate": HANDLERS["evaluate"]}, rt).value == "succeeded"
     return job_id, ids

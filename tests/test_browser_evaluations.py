@@ -76,6 +76,28 @@ def test_curator_opens_a_report_and_sorts_samples_by_error(browser, server, tmp_
     page.close()
 
 
+def test_the_form_refuses_without_a_method_then_launches_on_a_runs_test_split(browser, server) -> None:  # type: ignore[no-untyped-def]
+    from playwright.sync_api import expect
+
+    url, _ = server
+    page = browser.new_page(viewport={"width": 1366, "height": 768})
+    login(page, url, "curator", PASSWORD)
+    page.goto(f"{url}/evaluations")
+    form = page.locator("#launch-evaluation")
+    for box in form.locator("input[name=methods]").all():
+        box.uncheck()
+    form.locator("button[type=submit]").click()
+    expect(form.locator("[data-error-for=methods]")).to_have_text("tick at least one method to score")
+    assert page.url == f"{url}/evaluations"
+    form.locator("input[name=methods][value=sgbm]").check()
+    form.locator("select[name=run]").select_option("1")
+    form.locator("button[type=submit]").click()
+    page.wait_for_url(f"{url}/evaluations/2")
+    page.goto(f"{url}/evaluations")
+    expect(page.locator("#evaluation-list tbody tr[data-evaluation-id='2']")).to_contain_text("test split of run 1")
+    page.close()
+
+
 def test_an_annotator_gets_403(browser, server) -> None:  # type: ignore[no-untyped-def]
     url, _ = server
     page = browser.new_page()

@@ -63,6 +63,30 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
                 proc.kill()
 
 
+def test_a_crop_too_large_for_the_data_is_refused_under_the_crop_field(browser, server: str) -> None:  # type: ignore[no-untyped-def]
+    page = browser.new_page()
+    login(page, server, "admin", PASSWORD)
+    page.goto(f"{server}/models")
+    form = page.locator("#launch")
+    assert "64x96 fits the accepted samples" in form.locator("[name=crop]").get_attribute("placeholder")
+    form.locator("[name=crop]").fill("4000x8000")
+    form.locator("[name=steps]").fill("1e12")
+    form.locator("button[type=submit]").click()
+    steps = form.locator("[data-error-for=steps]")
+    steps.wait_for(state="visible")
+    assert "at most 1000000" in steps.inner_text()
+    form.locator("[name=steps]").fill("4")
+    form.locator("button[type=submit]").click()
+    crop = form.locator("[data-error-for=crop]")
+    page.wait_for_function("() => document.querySelector('[data-error-for=crop]').textContent.includes('smallest')")
+    assert crop.is_visible() and "try 64x96" in crop.inner_text()
+    assert steps.is_hidden() and form.locator("[name=crop]").get_attribute("aria-invalid") == "true"
+    assert page.url == f"{server}/models"  # refused: no run, the browser stays on the form
+    page.keyboard.press("?")
+    assert page.locator("#keys-help").is_visible()
+    page.context.close()
+
+
 def test_admin_launches_a_run_and_sees_its_chart_grow(browser, server: str, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     page = browser.new_page()
     login(page, server, "admin", PASSWORD)
@@ -73,7 +97,7 @@ def test_admin_launches_a_run_and_sees_its_chart_grow(browser, server: str, tmp_
     form.locator("[name=batch]").fill("2")
     form.locator("[name=crop]").fill("32x64")
     form.locator("[name=iters]").fill("2")
-    form.locator("[name=devices]").fill("cpu")
+    form.locator("[name=devices]").select_option("cpu")
     form.locator("button[type=submit]").click()
     page.wait_for_url(f"{server}/models/runs/*")
     points = "Number(document.querySelector('#charts svg[aria-label=\"training loss\"]').dataset.points || 0)"

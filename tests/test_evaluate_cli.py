@@ -36,7 +36,11 @@ def test_evaluate_here_json_on_a_kitti_folder(tmp_path: Path) -> None:
                                 "--out", str(out), "--here", "--json")
     assert code == 0, stderr
     report = json.loads(stdout)
-    assert report["samples"] == 2 and report["resolution"] == "full" and report["dataset"] == str(tmp_path / "kitti")
+    assert report["samples"] == 2 and report["resolution"] == "full" and report["dataset"] == "kitti"
+    assert str(tmp_path) not in json.dumps(report)  # the report names folders, never server paths
+    # Progress and one short closing line on stderr: the report itself only on stdout.
+    closing = [line for line in stderr.splitlines() if line.startswith("job ") and "succeeded" in line]
+    assert closing and len(closing[0]) < 200, stderr[-500:]
     assert set(report["methods"]) == {"sgbm", "predictions"}
     predictions = report["methods"]["predictions"]
     assert predictions["regions"]["all"]["epe"] == 0 and predictions["regions"]["all"]["bad2"] == 0
@@ -48,6 +52,8 @@ def test_evaluate_without_data_or_model_is_one_clear_error(tmp_path: Path) -> No
     home = tmp_path / "ws"
     assert _cli(home, "init")[0] == 0
     code, _, stderr = _cli(home, "evaluate", "--method", "sgbm", "--run", "7", "--here")
+    assert code != 0 and "run: no run 7" in stderr
+    code, _, stderr = _cli(home, "evaluate", "--method", "sgbm", "--here")
     assert code != 0 and "test split" in stderr
     code, _, stderr = _cli(home, "evaluate", "--data", str(tmp_path), "--format", "kitti", "--here")
     assert code != 0 and "checkpoint" in stderr  # fusion by default, and no model promoted

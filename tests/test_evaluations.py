@@ -46,12 +46,14 @@ def test_api_lists_shows_and_launches_for_curators_only(client, tokens, evaluate
     assert client.get("/api/v1/evaluations", headers=_auth(tokens, "annotator")).status_code == 403
     shown = client.get(f"/api/v1/evaluations/{listed[0]['id']}", headers=_auth(tokens, "curator")).json
     assert shown["methods"] == ["predictions", "sgbm"] and shown["format"] == "database"
-    bad = client.post("/api/v1/evaluations", json={"methods": ["sgbm"], "data": str(tmp_path), "format": "nope"},
+    bad = client.post("/api/v1/evaluations", json={"methods": ["sgbm"], "data": {"root": "x", "format": "nope"}},
                       headers=_auth(tokens, "curator"))
-    assert bad.status_code == 400 and "--format" in bad.json["error"]
-    no_model = client.post("/api/v1/evaluations", json={"data": str(tmp_path), "format": "kitti"},
+    assert bad.status_code == 400 and bad.json["error"].startswith("data.format: must be one of")
+    nothing = client.post("/api/v1/evaluations", json={"run": 1}, headers=_auth(tokens, "curator"))
+    assert nothing.status_code == 400 and nothing.json["error"] == "methods: tick at least one method to score"
+    no_model = client.post("/api/v1/evaluations", json={"methods": ["fusion"], "run": 1},
                            headers=_auth(tokens, "curator"))
-    assert no_model.status_code == 400 and "checkpoint" in no_model.json["error"]
+    assert no_model.status_code == 400 and no_model.json["error"].startswith("checkpoint: ")
     launched = client.post("/api/v1/evaluations", json={"methods": ["sgbm"], "run": 1}, headers=_auth(tokens, "curator"))
     assert launched.status_code == 202 and launched.json["state"] == "queued" and launched.json["job"]
     assert client.post("/api/v1/evaluations", json={"methods": ["sgbm"], "run": 1},

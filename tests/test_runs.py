@@ -39,10 +39,11 @@ def _launch(client, tokens, **body):  # type: ignore[no-untyped-def]
 def _queued_run(runtime) -> int:  # type: ignore[no-untyped-def]
     """A run row with its job, made by the service with a hand-written config (no preset needed)."""
     with transaction(runtime.sessions) as s:
+        selection = training.DataSelection()
         run = training.create_run(s, runtime.media, runtime.settings.runs_dir, preset="lite",
-                                  config={"preset": "lite", "train": {"steps": 10}},
-                                  selection=training.DataSelection(),
-                                  launch=training.Launch(split=training.parse_split(training.DEFAULT_SPLIT)), user=None)
+                                  config={"preset": "lite", "train": {"steps": 10}}, selection=selection,
+                                  launch=training.Launch(split=training.parse_split(training.DEFAULT_SPLIT)),
+                                  version=training.pin_selection(s, runtime.media, selection), user=None)
         run.job_id = runtime.submit(s, "train", {"run_id": run.id}, None).id
         return run.id
 
@@ -65,7 +66,8 @@ def test_launch_pins_the_version_splits_by_video_and_writes_run_json(client, tok
     assert run["state"] == "queued" and run["step"] == 0 and run["checkpoint"] is None
     assert run["resumed_from_step"] is None
     assert run["dataset"]["samples"] == len(samples) and run["dataset"]["kinds"]["synthesized"] == len(samples)
-    doc = json.loads((Path(run["run_dir"]) / "run.json").read_text())
+    assert run["run_dir"] == f"runs/{run['run']}"  # answers name files relative to the workspace
+    doc = json.loads((runtime.settings.home / run["run_dir"] / "run.json").read_text())
     assert doc["config"]["train"]["steps"] == 4 and doc["config"]["train"]["seed"] == 3
     assert doc["data"] == {"format": "database", "root": None}
     assert doc["media_root"] == str(runtime.settings.media_root)
@@ -80,19 +82,21 @@ def test_launch_pins_the_version_splits_by_video_and_writes_run_json(client, tok
 
 
 @pytest.mark.parametrize(("body", "message"), [
-    ({"preset": "huge"}, "preset 'huge'"),
+    ({"preset": "huge"}, "preset: must be one of 'lite' or 'paper'"),
     ({"split": "train=0.5,val=0.6"}, "sum to 1"),
     ({"split": "train=0.9,holdout=0.1"}, "'holdout'"),
     ({"split": "train=1"}, "val needs a fraction"),
-    ({"nproc": 0}, "processes must be"),
-    ({"devices": "tpu"}, "devices 'tpu'"),
-    ({"seed": -1}, "seed must be"),
-    ({"crop": "big"}, "crop 'big'"),
-    ({"steps": "many"}, "steps must be an integer"),
-    ({"kinds": ["painted"]}, "kind 'painted'"),
-    ({"nnodes": 2}, "rendezvous endpoint"),
-    ({"init_checkpoint": "/nonexistent.pt"}, "is not a file"),
-    ({"format": "kitti", "data_root": "/nonexistent"}, "is not a directory"),
+    ({"nproc": 0}, "nproc: must be at least 1"),
+    ({"devices": "tpu"}, "devices: expected auto, cpu, cuda"),
+    ({"seed": -1}, "seed: must be at least 0"),
+    ({"crop": "big"}, "crop: expected HxW"),
+    ({"steps": "many"}, "steps: must be an integer"),
+    ({"kinds": ["painted"]}, "kinds: must be one of"),
+    ({"nnodes": 2}, "multi-node runs are launched from the command line"),
+    ({"init_checkpoint": "/nonexistent.pt"}, "name a run's checkpoint instead"),
+    ({"format": "kitti", "data_root": "/nonexistent"}, "name a registered dataset root instead"),
+    ({"init": {"run": 99, "checkpoint": "best"}}, "init: no run 99"),
+    ({"data": {"root": "nowhere", "path": "", "format": "kitti"}}, "no dataset root named 'nowhere'"),
 ])
 def test_bad_launch_input_is_a_400_naming_it(client, tokens, samples, body, message) -> None:  # type: ignore[no-untyped-def]
     response = _launch(client, tokens, **body)
@@ -206,11 +210,21 @@ def test_a_lost_worker_shows_as_interrupted_and_diverged_runs_do_not_resume(runt
             training.prepare_resume(s, run, None)
 
 
+def write_checkpoint(path: Path, step: int, value: float = 1.0) -> None:
+    """A minimal real checkpoint (the loader reads its format, step and weights only)."""
+    import torch
+
+    from model.checkpoint import FORMAT
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    torch.save({"format": FORMAT, "config": {}, "state": {"w": torch.full((2,), value)}, "step": step, "extra": {}},
+               path)
+
+
 def _fake_checkpoints(runtime, run_id: int) -> Path:  # type: ignore[no-untyped-def]
     folder = training.run_dir(runtime.settings.runs_dir, run_id) / "checkpoints"
-    folder.mkdir(parents=True)
-    for name in ("step_0000002.pt", "step_0000004.pt", "best.pt"):
-        (folder / name).write_bytes(name.encode())
+    for name, step in (("step_0000002.pt", 2), ("step_0000004.pt", 4), ("best.pt", 4)):
+        write_checkpoint(folder / name, step)
     with transaction(runtime.sessions) as s:
         training.apply_events(s, s.get(TrainingRun, run_id), EVENTS)
     return folder
@@ -223,26 +237,32 @@ def test_promote_best_freezes_it_keeps_it_and_writes_current_json(client, tokens
     response = client.post(f"/api/v1/runs/{run_id}/promote", json={"checkpoint": "best"}, headers=bearer(tokens, "admin"))
     assert response.status_code == 200, response.json
     frozen = folder / "best_step_0000004.pt"
-    assert response.json == {"checkpoint": str(frozen), "run": run_id, "step": 4}
-    assert json.loads((runtime.settings.models_dir / "current.json").read_text()) == response.json
+    assert response.json == {"run": run_id, "file": frozen.name, "step": 4, "best": True}
+    assert json.loads((runtime.settings.models_dir / "current.json").read_text())["checkpoint"] == \
+        f"runs/{run_id}/checkpoints/{frozen.name}"
     assert registry.current_checkpoint(runtime.settings) == frozen
     # best.pt is replaced atomically when validation improves; the current model is not.
+    before = frozen.read_bytes()
     (folder / "best.pt").unlink()
-    (folder / "best.pt").write_bytes(b"newer")
-    assert frozen.read_bytes() == b"best.pt"
+    write_checkpoint(folder / "best.pt", 6, value=2.0)
+    assert frozen.read_bytes() == before
     keep = json.loads((folder.parent / "keep.json").read_text())["paths"]
-    assert str(frozen) in keep
+    assert f"checkpoints/{frozen.name}" in keep
     last = client.post(f"/api/v1/runs/{run_id}/promote", json={"checkpoint": "last"}, headers=bearer(tokens, "admin"))
-    assert last.json["step"] == 4 and last.json["checkpoint"].endswith("step_0000004.pt")
+    assert last.json["step"] == 4 and last.json["file"] == "step_0000004.pt"
     by_name = client.post(f"/api/v1/runs/{run_id}/promote", json={"checkpoint": "step_0000002.pt"},
                           headers=bearer(tokens, "admin"))
     assert by_name.json["step"] == 2
     assert client.post(f"/api/v1/runs/{run_id}/promote", json={"checkpoint": "../../secret"},
-                       headers=bearer(tokens, "admin")).status_code == 404
+                       headers=bearer(tokens, "admin")).status_code == 400
     shown = client.get(f"/api/v1/runs/{run_id}", headers=bearer(tokens, "curator")).json
-    assert shown["current"] is True and {c["name"] for c in shown["checkpoints"]} >= {"best.pt", "step_0000004.pt"}
+    assert shown["current"] is True
+    assert {c["name"] for c in shown["checkpoints"]} >= {"best.pt", "step_0000004.pt", frozen.name}
+    assert all("path" not in c for c in shown["checkpoints"])
     download = client.get(f"/api/v1/runs/{run_id}/checkpoints/step_0000002.pt", headers=bearer(tokens, "curator"))
-    assert download.status_code == 200 and download.data == b"step_0000002.pt"
+    assert download.status_code == 200 and download.data == (folder / "step_0000002.pt").read_bytes()
+    promoted = client.get(f"/api/v1/runs/{run_id}/checkpoints/{frozen.name}", headers=bearer(tokens, "curator"))
+    assert promoted.status_code == 200 and promoted.data == before
     assert len(json.loads((folder.parent / "keep.json").read_text())["paths"]) == 3
 
 

@@ -58,7 +58,8 @@ def test_torchrun_command_single_node_and_multi_node(tmp_path: Path) -> None:
     single = torchrun_command(run_dir, {"nproc": 2}, watch_pid=123)
     assert single[:3] == [sys.executable, "-m", "torch.distributed.run"]
     assert "--standalone" in single and single[single.index("--nproc-per-node") + 1] == "2"
-    assert single[-5:] == ["-m", "model.train", str(run_dir), "--watch-pid", "123"]
+    # The ranks watch the worker and their parent (torchrun starts each in a session of its own).
+    assert single[-6:] == ["-m", "model.train", str(run_dir), "--watch-pid", "123", "--watch-parent"]
     assert single[single.index("--local-ranks-filter") + 1] == "0"  # rank 0's output is the job log
     multi = torchrun_command(run_dir, {"nproc": 4, "nnodes": 2, "rdzv_endpoint": "node0:29400"}, watch_pid=1)
     assert "--standalone" not in multi

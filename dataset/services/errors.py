@@ -11,6 +11,15 @@ class InvalidInput(ServiceError):
     status = 400
 
 
+class FieldError(InvalidInput):
+    """Bad input in one named field of a request (a launch form's): answers carry the field, so a
+    form can show the reason next to it."""
+
+    def __init__(self, field: str, reason: str) -> None:
+        super().__init__(f"{field}: {reason}" if field else reason)
+        self.field, self.reason = field, reason
+
+
 class NotFound(ServiceError):
     status = 404
 

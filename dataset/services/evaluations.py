@@ -14,6 +14,7 @@ from sqlalchemy import delete, func, select
 from sqlalchemy.orm import Session
 
 from dataset.models import Evaluation, EvaluationResult, Frame, Sample, User, Video
+from dataset.services.dataset_roots import folder_label
 from dataset.services.errors import InvalidInput, NotFound
 from dataset.services.sample_review import sample_json
 
@@ -25,15 +26,38 @@ def evaluation_for_job(session: Session, job_id: int, params: dict[str, Any], us
     """The job's evaluation row, created on first call (a retried job keeps its row)."""
     row = session.scalar(select(Evaluation).where(Evaluation.job_id == job_id))
     if row is None:
-        row = Evaluation(job_id=job_id, params=params, dataset=params.get("data") or _split_name(params),
+        row = Evaluation(job_id=job_id, params=params, dataset=dataset_label(params),
                          created_by_id=user.id if user else None)
         session.add(row)
         session.flush()
     return row
 
 
-def _split_name(params: dict[str, Any]) -> str:
-    return f"test split of {params.get('run_dir')}"
+def dataset_label(params: dict[str, Any]) -> str:
+    """How answers name what an evaluation scores (``model.evaluation``'s parameters): a folder in a
+    registered root (``root:path``), a command-line folder by its name, or a run's test split."""
+    data = params.get("data")
+    if data is None:
+        return f"test split of run {params.get('run') or Path(str(params.get('run_dir'))).name}"
+    if isinstance(data, str):  # an evaluation of an earlier release: a path
+        return Path(data).name
+    return folder_label(data["root"], data.get("path", "")) if "root" in data else Path(data["dir"]).name
+
+
+def _checkpoint_step(ref: Any) -> int | None:
+    return ref.get("step") if isinstance(ref, dict) else None
+
+
+def checkpoint_label(ref: dict[str, Any] | None) -> str | None:
+    """How answers name an evaluation's checkpoint: run, file and step, never a path."""
+    if ref is None:
+        return None
+    if isinstance(ref, str):  # an evaluation of an earlier release: a path
+        return Path(ref).name
+    if "path" in ref:
+        return Path(ref["path"]).name
+    step = f", step {ref['step']}" if ref.get("step") is not None else ""
+    return f"run {ref['run']} · {ref['file']}{step}"
 
 
 def _finite(value: Any) -> float | None:
@@ -78,8 +102,10 @@ def evaluation_json(evaluation: Evaluation) -> dict[str, Any]:
             "created_by": evaluation.created_by.name if evaluation.created_by else None,
             "created_at": evaluation.created_at.isoformat() + "Z", "dataset": evaluation.dataset,
             "format": evaluation.params.get("format"), "methods": evaluation.params.get("methods", []),
-            "resolution": evaluation.params.get("resolution"), "checkpoint": evaluation.params.get("checkpoint"),
-            "summary": evaluation.summary, "report_dir": evaluation.report_dir,
+            "resolution": evaluation.params.get("resolution"),
+            "checkpoint": checkpoint_label(evaluation.params.get("checkpoint")),
+            "run": evaluation.params.get("run"), "step": _checkpoint_step(evaluation.params.get("checkpoint")),
+            "summary": evaluation.summary,
             "has_results": evaluation.summary.get("database_rows", 0) > 0}
 
 

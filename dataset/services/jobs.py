@@ -223,7 +223,9 @@ def execute_job(job_id: int, handlers: dict[str, Handler], env: JobEnv) -> JobSt
             raise LookupError(f"no handler for job kind {kind!r}")
         result = handler(ctx)
     except Exception as exc:  # a job's failure is data for the user, not a worker crash
-        ctx.finish(traceback.format_exc())
+        # An ending worded for people (a cancelled or diverged run, bad input) is its own message;
+        # a bug keeps its traceback.
+        ctx.finish(f"{type(exc).__name__}: {exc}" if isinstance(exc, ServiceError) else traceback.format_exc())
         return _finish(sessions, job_id, me, state=JobState.failed, error=user_error(exc))
     ctx.finish(None, progress=1.0)
     return _finish(sessions, job_id, me, state=JobState.succeeded, result=result)

@@ -18,13 +18,13 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import and_, or_, select
+from sqlalchemy import and_, func, or_, select
 from sqlalchemy.orm import Session
 
 from dataset.atomic import atomic_write_bytes
 from dataset.export.splits import parse_split_spec, split_of
 from dataset.media import MediaStore
-from dataset.models import IllusionType, JobState, RunState, TrainingMetric, TrainingRun, User, utcnow
+from dataset.models import Frame, IllusionType, JobState, RunState, Sample, SampleState, TrainingMetric, TrainingRun, User, utcnow
 from dataset.readers import READER_FORMATS, open_reader
 from dataset.readers.version import pin_dataset_version, split_by_video, version_counts, version_media_keys
 from dataset.services import audit
@@ -36,7 +36,8 @@ SAMPLE_KINDS = ("synthesized", "capture")
 DATABASE = "database"
 MAX_PROCESSES = 64
 _DEVICES = re.compile(r"^(auto|cpu|cuda|cuda:\d+(,\d+)*)$")
-_CHECKPOINT = re.compile(r"^step_(\d+)\.pt$")
+_CHUNK = 1000  # ids per IN (…) query: below every database's limit on bound parameters
+_CHECKPOINT = re.compile(r"^(?:step_(\d{7,})|best|best_step_(\d{7,}))\.pt$")
 
 
 @dataclass(frozen=True)
@@ -48,11 +49,12 @@ class DataSelection:
     kinds: tuple[str, ...] = ()
     qa_ok: bool = False  # only samples without QA flags
     format: str = DATABASE
-    root: str | None = None  # the folder, for any format but the database
+    root: str | None = None  # the folder, for any format but the database (never shown)
+    label: str | None = None  # how answers name that folder: ``root:relative/path``
 
     def describe(self) -> str:
         if self.format != DATABASE:
-            return f"{self.format} folder {self.root}"
+            return f"{self.format} folder {self.label or Path(self.root or '').name}"
         parts = [f"videos {', '.join(map(str, self.video_ids))}" if self.video_ids else "",
                  f"illusion types {', '.join(self.illusion_types)}" if self.illusion_types else "",
                  f"kinds {', '.join(self.kinds)}" if self.kinds else "", "without QA flags" if self.qa_ok else ""]
@@ -65,7 +67,8 @@ class Launch:
 
     nproc: int = 1
     devices: str = "auto"  # auto, cpu, cuda, cuda:0,1 (the GPUs the trainers may see)
-    init_checkpoint: str | None = None
+    init_checkpoint: str | None = None  # the file (never shown)
+    init_label: str | None = None  # how answers name it: "run 3 · best_step_0000250.pt"
     nnodes: int = 1
     rdzv_endpoint: str | None = None  # host:port of the rendezvous for a multi-node run
     split: dict[str, float] = field(default_factory=dict)
@@ -102,7 +105,7 @@ def validate_selection(selection: DataSelection) -> None:
     if selection.format not in READER_FORMATS:
         raise InvalidInput(f"data format {selection.format!r}: expected {DATABASE} or one of {', '.join(READER_FORMATS)}")
     if not selection.root or not Path(selection.root).is_dir():
-        raise InvalidInput(f"data folder {selection.root!r} is not a directory")
+        raise InvalidInput(f"data folder {selection.label or selection.root!r} is not a directory")
     if selection.video_ids or selection.illusion_types or selection.kinds or selection.qa_ok:
         raise InvalidInput("video, illusion type, kind and QA filters select from the database, not from a folder")
 
@@ -121,11 +124,12 @@ def validate_launch(launch: Launch) -> None:
     if launch.seed < 0:
         raise InvalidInput(f"seed must be ≥ 0, got {launch.seed}")
     if launch.init_checkpoint is not None and not Path(launch.init_checkpoint).is_file():
-        raise InvalidInput(f"init checkpoint {launch.init_checkpoint} is not a file")
+        raise InvalidInput(f"init checkpoint {launch.init_label or launch.init_checkpoint} is not a file")
 
 
 def pin_selection(session: Session, media: MediaStore, selection: DataSelection) -> dict[str, Any]:
-    """The dataset version a run trains on; an empty selection is refused with the reason."""
+    """The dataset version a run trains on; a bad or empty selection is refused with the reason."""
+    validate_selection(selection)
     if selection.format != DATABASE:
         return _pin_folder(selection)
     version = pin_dataset_version(
@@ -146,9 +150,36 @@ def _pin_folder(selection: DataSelection) -> dict[str, Any]:
         raise InvalidInput(f"nothing to train on: the {selection.describe()} holds no samples")
     digest = hashlib.sha256(json.dumps([selection.format, names]).encode()).hexdigest()
     return {"id": digest, "created_at": utcnow().isoformat() + "Z",
-            "filters": {"format": selection.format, "root": selection.root},
+            "filters": {"format": selection.format, "root": selection.label or Path(selection.root or "").name},
             "items": [{"name": n, "video_id": _folder_group(n), "kind": "synthesized", "illusion_types": []}
                       for n in names]}
+
+
+def smallest_image(session: Session, version: dict[str, Any], selection: DataSelection) -> tuple[int, int] | None:
+    """(H, W) pixels of the smallest image in a pinned version: the most a training crop may take.
+    A folder's samples are assumed to share its first sample's size (its readers give no sizes
+    without reading the images); None when it cannot be read (the trainer will say why)."""
+    if _is_folder(version):
+        try:
+            height, width = open_reader(selection.format, Path(selection.root or ""))[0].disparity.shape
+        except (OSError, ValueError, IndexError):
+            return None
+        return int(height), int(width)
+    ids = [item["sample_id"] for item in version["items"]]
+    sizes = [_smallest_frame(session, Sample.id.in_(ids[i:i + _CHUNK])) for i in range(0, len(ids), _CHUNK)]
+    sizes = [size for size in sizes if size is not None]
+    return (min(h for h, _ in sizes), min(w for _, w in sizes)) if sizes else None
+
+
+def smallest_accepted_image(session: Session) -> tuple[int, int] | None:
+    """(H, W) pixels of the smallest accepted sample's frame: what a launch form's crop suggestion fits."""
+    return _smallest_frame(session, Sample.state == SampleState.accepted)
+
+
+def _smallest_frame(session: Session, where: Any) -> tuple[int, int] | None:
+    row = session.execute(select(func.min(Frame.height), func.min(Frame.width))
+                          .join(Sample, Sample.frame_id == Frame.id).where(where)).one()
+    return (int(row[0]), int(row[1])) if row[0] is not None else None
 
 
 def _is_folder(version: dict[str, Any]) -> bool:
@@ -171,7 +202,7 @@ def split_version(version: dict[str, Any], fractions: dict[str, float], seed: in
     for needed in ("train", "val"):
         if not splits[needed]:
             raise InvalidInput(f"the selection holds {videos} video(s) and the {needed} split came out empty; "
-                               "select samples of more videos (no video is in two splits) or change --split")
+                               "select samples of more videos (no video, nor copies of one, is in two splits) or change --split")
     return splits
 
 
@@ -184,33 +215,36 @@ def _split_folder(version: dict[str, Any], fractions: dict[str, float], seed: in
 
 
 def create_run(session: Session, media: MediaStore, runs_dir: Path, *, preset: str, config: dict[str, Any],
-               selection: DataSelection, launch: Launch, user: User | None) -> TrainingRun:
-    """Validate, pin the dataset version, split it, and write the run directory with ``run.json``.
+               selection: DataSelection, launch: Launch, version: dict[str, Any], user: User | None) -> TrainingRun:
+    """Split the pinned dataset ``version`` (:func:`pin_selection`) and write the run directory with
+    ``run.json``.
 
     The row is flushed (it has its id) but not committed; the caller queues the train job in the
-    same transaction. ``config`` is the resolved preset (``Config.to_dict()``).
+    same transaction. ``config`` is the resolved preset (``Config.to_dict()``). The row's ``launch``
+    is what answers show: folders and checkpoints by their labels; their paths go to ``run.json``.
     """
-    validate_selection(selection)
     validate_launch(launch)
-    version = pin_selection(session, media, selection)
     splits = split_version(version, launch.split, launch.seed)
+    shown = {**asdict(launch), "init_checkpoint": launch.init_label, "data": asdict(selection)}
+    shown["data"]["root"] = selection.label or (Path(selection.root).name if selection.root else None)
+    del shown["init_label"], shown["data"]["label"]
     run = TrainingRun(preset=preset, config=config, dataset_id=version["id"], dataset=version, splits=splits,
-                      launch={**asdict(launch), "data": asdict(selection)},
-                      created_by_id=user.id if user else None)
+                      launch=shown, created_by_id=user.id if user else None)
     session.add(run)
     session.flush()
-    write_run_json(run_dir(runs_dir, run.id), run, media.root)
+    write_run_json(run_dir(runs_dir, run.id), run, media.root, data_root=selection.root,
+                   init_checkpoint=launch.init_checkpoint)
     if user is not None:
         audit.record(session, user.id, "run.launch", "run", run.id, preset=preset, dataset=version["id"])
     return run
 
 
-def write_run_json(directory: Path, run: TrainingRun, media_root: Path) -> None:
+def write_run_json(directory: Path, run: TrainingRun, media_root: Path, *, data_root: str | None,
+                   init_checkpoint: str | None) -> None:
     """The engine's input, written once; a retry finds the same file."""
-    selection = run.launch["data"]
-    data = {"format": selection["format"], "root": selection["root"]}
+    data = {"format": run.launch["data"]["format"], "root": data_root}
     doc = {"config": run.config, "dataset": run.dataset, "splits": run.splits, "media_root": str(media_root),
-           "init_checkpoint": run.launch.get("init_checkpoint"), "data": data, "run": run.id,
+           "init_checkpoint": init_checkpoint, "data": data, "run": run.id,
            "device": engine_device(run.launch.get("devices", "auto"))}
     atomic_write_bytes(directory / "run.json", json.dumps(doc, indent=1).encode())
 
@@ -253,15 +287,19 @@ def kind_counts(version: dict[str, Any]) -> dict[str, int]:
 
 
 def checkpoint_files(directory: Path) -> list[dict[str, Any]]:
-    """The checkpoints on disk, newest step first, then ``best.pt``: name, step (None for best), bytes."""
+    """The run's checkpoint files, newest step first, then the best ones: name, step (None for
+    ``best.pt``, whose step is the run's ``best_step``), bytes and path (never for answers).
+    Symbolic links and files of other names are not the run's checkpoints."""
     folder = directory / "checkpoints"
     found = []
-    for path in folder.glob("*.pt") if folder.is_dir() else []:
+    for path in folder.iterdir() if folder.is_dir() else []:
         match = _CHECKPOINT.match(path.name)
-        if match or path.name == "best.pt":
-            found.append({"name": path.name, "path": str(path), "step": int(match.group(1)) if match else None,
-                          "bytes": path.stat().st_size})
-    return sorted(found, key=lambda c: (c["step"] is None, -(c["step"] or 0)))
+        if match is None or path.is_symlink() or not path.is_file():
+            continue
+        step = match.group(1) or match.group(2)
+        found.append({"name": path.name, "step": int(step) if step else None, "bytes": path.stat().st_size,
+                      "path": path})
+    return sorted(found, key=lambda c: (c["step"] is None, c["name"].startswith("best"), -(c["step"] or 0)))
 
 
 def run_json(run: TrainingRun, runs_dir: Path, *, current: dict[str, Any] | None = None,
@@ -270,6 +308,7 @@ def run_json(run: TrainingRun, runs_dir: Path, *, current: dict[str, Any] | None
     directory = run_dir(runs_dir, run.id)
     last = directory / run.last_checkpoint if run.last_checkpoint else None
     best = directory / "checkpoints" / "best.pt"
+    # Answers name files inside the run's folder, never by their server path.
     duration = ((run.finished_at or utcnow()) - run.started_at).total_seconds() if run.started_at else None
     state = effective_state(run)
     reason = run.reason or (run.job.error if state != run.state and run.job is not None else None)
@@ -277,8 +316,8 @@ def run_json(run: TrainingRun, runs_dir: Path, *, current: dict[str, Any] | None
         "run": run.id, "job": run.job_id, "state": state.value, "preset": run.preset,
         "step": run.step, "steps": run.steps or run.config.get("train", {}).get("steps", 0),
         "progress": (run.step / run.steps) if run.steps else 0.0,
-        "checkpoint": str(last) if last is not None and last.is_file() else None,
-        "best_checkpoint": str(best) if best.is_file() else None,
+        "checkpoint": last.name if last is not None and last.is_file() else None,
+        "best_checkpoint": best.name if best.is_file() else None,
         "resumed_from_step": run.resumed_from_step, "world_size": run.world_size,
         "loss": run.loss, "lr": run.lr, "samples_per_s": run.samples_per_s, "eta_s": run.eta_s,
         "best_val_epe": run.best_val_epe, "best_step": run.best_step, "last_val": run.last_val or None,
@@ -286,7 +325,7 @@ def run_json(run: TrainingRun, runs_dir: Path, *, current: dict[str, Any] | None
         "dataset": {"id": run.dataset_id, "samples": len(run.dataset.get("items", [])),
                     "kinds": kind_counts(run.dataset), "filters": run.dataset.get("filters", {}),
                     "splits": {name: len(ids) for name, ids in run.splits.items()}},
-        "launch": run.launch, "run_dir": str(directory),
+        "launch": run.launch, "run_dir": f"runs/{run.id}",
         "current": bool(current and current.get("run") == run.id),
         "created_by": run.created_by.name if run.created_by else None,
         "created_at": _iso(run.created_at), "started_at": _iso(run.started_at),
@@ -294,7 +333,7 @@ def run_json(run: TrainingRun, runs_dir: Path, *, current: dict[str, Any] | None
     }
     if full:
         data.update(config=run.config, version=run.dataset, splits=run.splits,
-                    checkpoints=checkpoint_files(directory))
+                    checkpoints=[{k: v for k, v in f.items() if k != "path"} for f in checkpoint_files(directory)])
     return data
 
 
@@ -325,16 +364,22 @@ def metrics_since(session: Session, run_id: int, after_step: int = -1, after_val
 
 # --- control -----------------------------------------------------------------------------------
 
-def request_cancel(session: Session, run: TrainingRun, user: User | None) -> None:
-    """Ask the run to stop: a queued run ends now, a running one when its job has stopped the trainers."""
+def request_cancel(session: Session, run: TrainingRun, user: User | None, *, trainers_alive: bool = False) -> None:
+    """Ask the run to stop: a queued run ends now, a running one when its job has stopped the trainers.
+
+    ``trainers_alive``: a process of the run still lives (the caller looked), so even a run whose
+    job ended (failed, interrupted) is cancelled; the caller then ends those processes itself.
+    """
     state = effective_state(run)
-    if state.finished:
+    if state.finished and not trainers_alive:
         raise Conflict(f"run {run.id} is {state.value}; only queued or running runs can be cancelled")
     run.cancel_requested = True
     who = user.name if user else "the command line"
     run.reason = f"cancelled by {who}"
     if run.job is not None and run.job.state == JobState.queued:
         run.job.state, run.job.error, run.job.finished_at = JobState.failed, run.reason, utcnow()
+        run.state, run.finished_at = RunState.cancelled, utcnow()
+    elif state.finished:  # no job is left to finish the run
         run.state, run.finished_at = RunState.cancelled, utcnow()
     if user is not None:
         audit.record(session, user.id, "run.cancel", "run", run.id)
@@ -444,19 +489,26 @@ def _put_point(session: Session, run_id: int, kind: str, step: int, values: dict
         point.values = values
 
 
-def finish_run(run: TrainingRun, end: dict[str, Any] | None, exit_code: int | None) -> RunState:
-    """The run's final state from the engine's ``end`` event and the trainers' exit status."""
-    if run.cancel_requested:
+def finish_run(run: TrainingRun, end: dict[str, Any] | None, exit_code: int | None,
+               killed: str | None = None) -> RunState:
+    """The run's final state from the engine's ``end`` event and the trainers' exit status.
+
+    ``killed``: how a signal ended the trainers ("rank 0 was killed by SIGKILL — out of memory?"),
+    the reason when the engine could not say one itself."""
+    if end is not None and end.get("state") == "succeeded" and not exit_code:
+        state, run.reason = RunState.succeeded, None  # a cancel that came as the last step ended
+    elif run.cancel_requested or (end is not None and end.get("state") == "cancelled"):
         state = RunState.cancelled
+        stopped = end is not None and end.get("state") == "cancelled" and end.get("step") is not None
+        # The engine's checkpoint of that step is what a resume continues from.
+        run.reason = (run.reason or "cancelled") + (f" at step {end['step']}" if stopped else "")
     elif end is not None and end.get("state") in ("succeeded", "diverged", "failed"):
-        state = RunState(end["state"])
-        if state == RunState.succeeded and exit_code:
-            state = RunState.failed
-        run.reason = end.get("reason") or (None if state == RunState.succeeded
-                                           else f"trainers exited with status {exit_code}")
+        # A succeeded end with a bad exit status: something failed after the engine's last word.
+        state = RunState.failed if end["state"] == "succeeded" else RunState(end["state"])
+        run.reason = end.get("reason") or killed or f"trainers exited with status {exit_code}"
     else:
         state = RunState.failed
-        run.reason = f"trainers exited with status {exit_code} before the end of the run; see the job log"
+        run.reason = killed or f"trainers exited with status {exit_code} before the end of the run; see the job log"
     run.state, run.finished_at = state, utcnow()
     return state
 

@@ -6,7 +6,12 @@ Torch-free at import, so the product can read the exit codes without loading tor
 EXIT_SUCCEEDED = 0
 EXIT_FAILED = 1  # an exception: bad run.json, unreadable data, a crash (the end event says which)
 EXIT_USAGE = 2  # bad command line (argparse's own code)
-EXIT_DIVERGED = 3  # a non-finite loss; the last good checkpoint stays
+EXIT_DIVERGED = 3  # a non-finite loss or weights; the last good checkpoint stays
 EXIT_ORPHANED = 4  # the watched process (--watch-pid) is gone
 
-EXIT_CODES = {"succeeded": EXIT_SUCCEEDED, "failed": EXIT_FAILED, "diverged": EXIT_DIVERGED}
+# A cancelled run exits 0: it stopped as asked, with its checkpoint written, and torchrun reports
+# any other status as a crash (with a traceback in the log).
+EXIT_CODES = {"succeeded": EXIT_SUCCEEDED, "failed": EXIT_FAILED, "diverged": EXIT_DIVERGED,
+              "cancelled": EXIT_SUCCEEDED}
+
+CANCEL_FILE = "cancel"  # RUN_DIR/cancel: the ranks stop after the step that sees it, checkpoint and exit

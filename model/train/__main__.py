@@ -1,5 +1,8 @@
 """``torchrun [--nproc-per-node N] -m model.train RUN_DIR [--watch-pid PID]``, or without torchrun
-``python -m model.train RUN_DIR`` (one process). Exit codes: see ``model/train/__init__.py``."""
+``python -m model.train RUN_DIR`` (one process). Exit codes: see ``model/train/__init__.py``.
+
+``--watch-parent``: exit with the parent (torchrun's agent starts each rank in a session of its
+own, so a SIGKILLed agent would otherwise leave its ranks running)."""
 
 from __future__ import annotations
 
@@ -16,12 +19,15 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m model.train", description="Train the fusion model of RUN_DIR/run.json.")
     parser.add_argument("run_dir", type=Path, help="The run directory (run.json in it; everything the run writes goes there).")
     parser.add_argument("--watch-pid", type=int, metavar="PID", help="Exit within seconds once this process is gone.")
+    parser.add_argument("--watch-parent", action="store_true", help="Exit at once when the parent process is gone.")
     args = parser.parse_args(argv)
-    if args.watch_pid is not None:
+    watched = ([args.watch_pid] if args.watch_pid is not None else []) + ([os.getppid()] if args.watch_parent else [])
+    if watched:
         from model.train.watch import watch_pid
 
-        # os._exit: the main thread may sit in a collective or a forward pass; nothing else is safe.
-        watch_pid(args.watch_pid, lambda: os._exit(EXIT_ORPHANED))
+        for pid in watched:
+            # os._exit: the main thread may sit in a collective or a forward pass; nothing else is safe.
+            watch_pid(pid, lambda: os._exit(EXIT_ORPHANED))
     if not args.run_dir.is_dir():
         print(f"{args.run_dir}: no such run directory", file=sys.stderr)
         return EXIT_FAILED

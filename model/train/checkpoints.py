@@ -85,20 +85,27 @@ def copy_atomic(source: Path, target: Path) -> None:
 
 
 def rng_state() -> dict[str, Any]:
-    """This process's torch (CPU and CUDA), numpy and Python RNG states."""
-    state: dict[str, Any] = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
+    """This process's torch (CPU and CUDA), numpy and Python RNG states, as tensors and plain
+    values only, so that a checkpoint holding them loads with ``torch.load(weights_only=True)``:
+    numpy's MT19937 words become an int64 tensor (uint32 tensors do not survive the pickling of
+    ``all_gather_object``); Python's state is already a tuple of ints."""
+    kind, keys, pos, has_gauss, gauss = np.random.get_state()
+    numpy = (str(kind), torch.from_numpy(keys.astype(np.int64)), int(pos), int(has_gauss), float(gauss))
+    state: dict[str, Any] = {"torch": torch.get_rng_state(), "numpy": numpy, "python": random.getstate()}
     if torch.cuda.is_available() and torch.cuda.is_initialized():
         state["cuda"] = torch.cuda.get_rng_state_all()
     return state
 
 
 def restore_rng(state: dict[str, Any]) -> None:
-    """Put back what :func:`rng_state` took."""
-    torch.set_rng_state(state["torch"])
-    np.random.set_state(state["numpy"])
-    random.setstate(state["python"])
+    """Put back what :func:`rng_state` took (a checkpoint loaded onto a GPU holds them there; an
+    older checkpoint converted by ``checkpoints upgrade`` holds numpy's words as uint32)."""
+    torch.set_rng_state(state["torch"].cpu())
+    kind, keys, pos, has_gauss, gauss = state["numpy"]
+    np.random.set_state((kind, keys.cpu().numpy().astype(np.uint32), pos, has_gauss, gauss))
+    random.setstate(tuple(state["python"]))
     if "cuda" in state and torch.cuda.is_available():
-        torch.cuda.set_rng_state_all(state["cuda"])
+        torch.cuda.set_rng_state_all([s.cpu() for s in state["cuda"]])
 
 
 def seed_everything(seed: int) -> None:

@@ -9,7 +9,12 @@ AMP, frozen BatchNorm), made distributed, resumable and deterministic.
 - ``fusion_loss`` divides by the valid-pixel count of the whole global batch (all-reduced), so
   each rank's loss is its share of the global loss; DDP averages gradients over the ranks, so
   the backward pass is of ``loss × world_size``, which turns that average into the sum.
-- A checkpoint's ``extra`` holds everything else a resumed run needs (see :func:`_extra`).
+- A checkpoint's ``extra`` holds everything else a resumed run needs (see :func:`_extra`), as
+  tensors and plain values only: it loads with ``torch.load(weights_only=True)``.
+- A run ends ``diverged`` on a non-finite loss, non-finite weights or non-finite validation
+  predictions (its last good checkpoint stays), and ``cancelled`` after the step at which rank 0
+  sees ``RUN_DIR/cancel``: every rank stops at that step, and the checkpoint of that step is
+  written first, so a resume goes on from it.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ from model.data import open_split, training_loader
 from model.losses import fusion_loss
 from model.network import FusionNetwork, FusionOutput
 from model.presets import Config
+from model.train import CANCEL_FILE
 from model.train.checkpoints import (
     best_path,
     copy_atomic,
@@ -53,7 +59,7 @@ SCHEDULE_TAIL = 100
 
 @dataclasses.dataclass
 class Outcome:
-    state: str  # "succeeded" | "diverged"
+    state: str  # "succeeded" | "diverged" | "cancelled"
     reason: str | None
     step: int
 
@@ -90,9 +96,12 @@ class Trainer:
         self.params = [p for p in self.network.parameters() if p.requires_grad]
         self.model: nn.Module = self.network
         if world.backend is not None:
+            # Every trainable parameter gets a gradient in every step (lite, paper, use_vlm off; see
+            # tests/test_runs_honest.py), so DDP need not search the graph for unused ones (were one
+            # left out, DDP would stop the run at the next step with an error naming it).
             self.model = DistributedDataParallel(
                 self.network, device_ids=[self.device.index] if self.device.type == "cuda" else None,
-                find_unused_parameters=True)
+                find_unused_parameters=False)
         self.optimizer = torch.optim.AdamW(self.params, lr=cfg.lr, weight_decay=cfg.weight_decay, eps=1e-8)
         self.scheduler = torch.optim.lr_scheduler.OneCycleLR(
             self.optimizer, cfg.lr, total_steps=cfg.steps + SCHEDULE_TAIL, pct_start=cfg.pct_start,
@@ -176,10 +185,11 @@ class Trainer:
         for batch in batches:
             lr = self.optimizer.param_groups[0]["lr"]
             loss, parts = self._train_step(batch)
-            if not math.isfinite(loss):
-                reason = f"non-finite loss ({loss}) at step {self.step + 1}"
-                self._event({"event": "end", "state": "diverged", "reason": reason, "step": self.step})
-                return Outcome("diverged", reason, self.step)
+            diverged = (f"non-finite loss ({loss}) at step {self.step + 1}" if not math.isfinite(loss)
+                        else None if self._weights_finite() else f"non-finite weights after step {self.step + 1}")
+            if diverged is not None:
+                self._event({"event": "end", "state": "diverged", "reason": diverged, "step": self.step})
+                return Outcome("diverged", diverged, self.step)
             self.step += 1
             now = time.monotonic()
             train_s, timed = train_s + now - mark, timed + 1
@@ -189,11 +199,20 @@ class Trainer:
             if world.is_main and (now - last_event >= STEP_EVENT_EVERY_S or timed == 1 or self.step == cfg.steps):
                 rate = cfg.batch_size * window_steps / max(window_s, 1e-9)
                 self._event({"event": "step", "step": self.step, "steps": cfg.steps, "loss": loss, "lr": lr,
-                             "samples_per_s": round(rate, 3),
+                             "samples_per_s": round(rate, 3), "step_s": round(window_s / window_steps, 3),
                              "eta_s": round(train_s / timed * (cfg.steps - self.step), 1), "parts": parts})
                 print(f"step {self.step}/{cfg.steps} loss {loss:.4f} lr {lr:.3g} {rate:.2f} samples/s", flush=True)
                 last_event, window_s, window_steps = now, 0.0, 0
-            self._after_step()
+            diverged = self._after_step()
+            if diverged is not None:
+                self._event({"event": "end", "state": "diverged", "reason": diverged, "step": self.step})
+                return Outcome("diverged", diverged, self.step)
+            if self._cancel_seen():
+                if self.last_saved != self.step:
+                    self._checkpoint(best=False)
+                reason = f"cancelled at step {self.step}"
+                self._event({"event": "end", "state": "cancelled", "reason": reason, "step": self.step})
+                return Outcome("cancelled", reason, self.step)
             mark = time.monotonic()
         if self.last_saved != self.step:
             self._checkpoint(best=False)
@@ -238,23 +257,40 @@ class Trainer:
         self.scheduler.step()
         return stats[0], dict(zip(names, stats[1:], strict=True))
 
-    def _after_step(self) -> None:
+    def _weights_finite(self) -> bool:
+        """Whether every trained weight is finite (one device sync; DDP keeps the ranks' weights equal)."""
+        return bool(torch.stack([torch.isfinite(p).all() for p in self.params]).all())
+
+    def _cancel_seen(self) -> bool:
+        """Whether rank 0 sees the cancel flag, on every rank alike (one tiny all-reduce)."""
+        seen = self.world.is_main and (self.run_dir / CANCEL_FILE).exists()
+        return bool(all_sum(self.world, torch.tensor([float(seen)], device=self.device)).item())
+
+    def _after_step(self) -> str | None:
+        """Validate and checkpoint when due; why the run diverged when its predictions are not
+        finite (then nothing is saved)."""
         cfg = self.config.train
         final = self.step == cfg.steps
         best = False
         if self.val_reader is not None and (self.step % cfg.val_every == 0 or final):
-            best = self._validate()
+            best, non_finite = self._validate()
+            if non_finite:
+                return f"non-finite predictions on {non_finite} validation sample(s) after step {self.step}"
         if self.step % cfg.checkpoint_every == 0 or final:
             self._checkpoint(best=best)
         elif best:
             self._checkpoint(best=True, step_file=False)
+        return None
 
-    def _validate(self) -> bool:
-        """Rank 0 validates while the others wait; whether this is the best EPE so far (on every rank)."""
-        epe = math.nan
+    def _validate(self) -> tuple[bool, int]:
+        """Rank 0 validates while the others wait; on every rank: whether this is the best EPE so
+        far, and how many validation predictions were not finite."""
+        epe, non_finite = math.nan, 0
         if self.world.is_main:
             assert self.val_reader is not None and self.board is not None
-            metrics, images = validate(self.network, self.config, self.val_reader, self.device, self.run_dir, self.step)
+            started = time.monotonic()
+            result = validate(self.network, self.config, self.val_reader, self.device, self.run_dir, self.step)
+            metrics, images, non_finite = result.metrics, result.images, result.non_finite
             self.network.train()
             freeze_batchnorm(self.network)
             for region, values in metrics.items():
@@ -262,24 +298,26 @@ class Trainer:
             for path, rgb in images.items():
                 self.board.image(self.step, f"val/{Path(path).stem}", rgb)
             self.board.flush()
-            self._event({"event": "val", "step": self.step, "metrics": metrics, "images": list(images)})
+            self._event({"event": "val", "step": self.step, "metrics": metrics, "images": list(images),
+                         "seconds": round(time.monotonic() - started, 3)})
             epe = metrics["all"]["epe"]
-        epe = float(broadcast_object(self.world, epe))  # type: ignore[arg-type]
-        if math.isfinite(epe) and epe < self.best_epe:
-            self.best_epe = epe
-            return True
-        return False
+        epe, non_finite = broadcast_object(self.world, (epe, non_finite))  # type: ignore[misc]
+        if not non_finite and math.isfinite(epe) and epe < self.best_epe:
+            self.best_epe = float(epe)
+            return True, 0
+        return False, int(non_finite)
 
     def _checkpoint(self, *, best: bool, step_file: bool = True) -> None:
         """Write this step's checkpoint (and best.pt) on rank 0 with every rank's RNG state, then
         prune; the others wait, so nobody runs ahead of a checkpoint that may not exist."""
+        started = time.monotonic()
         states = gather_objects(self.world, rng_state())
         if self.world.is_main:
             target = step_path(self.run_dir, self.step) if step_file else best_path(self.run_dir)
             save_checkpoint(target, self.network, self.config, step=self.step, extra=self._extra(states))
             if step_file:
                 self._event({"event": "checkpoint", "step": self.step, "path": _relative(target, self.run_dir),
-                             "best": False})
+                             "best": False, "seconds": round(time.monotonic() - started, 3)})
             if best:
                 if step_file:
                     copy_atomic(target, best_path(self.run_dir))

@@ -3,14 +3,17 @@
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from model.presets import Config
+from model.presets import Config, TrainConfig
 
 RUN_FILE = "run.json"
 SPLITS = ("train", "val", "test")
+MAX_STEPS = 2**31 - 1  # steps reach the product's 32-bit integer columns
+MAX_SEED = 2**63 - 1  # torch generators take seeds below 2**64; the per-sample seeds add words to it
 
 
 @dataclass(frozen=True)
@@ -47,6 +50,7 @@ def read_run(run_dir: Path) -> RunSpec:
     if not isinstance(raw, dict) or "config" not in raw:
         raise ValueError(f"{path}: expected an object with a 'config'")
     config = Config.from_dict(raw["config"])
+    check_train(config.train, str(path))
     data = raw.get("data") or {"format": "database"}
     fmt = data.get("format", "database")
     splits = raw.get("splits") or {}
@@ -71,3 +75,19 @@ def read_run(run_dir: Path) -> RunSpec:
         init_checkpoint=Path(raw["init_checkpoint"]) if raw.get("init_checkpoint") else None,
         device=raw.get("device"), workers=workers,
     )
+
+
+def check_train(cfg: TrainConfig, where: str) -> None:
+    """Refuse values the engine cannot honour before any work starts (ValueError naming the field):
+    step counts past :data:`MAX_STEPS`, a learning rate or weight decay that is not a finite
+    positive (non-negative) number, a seed outside 0..MAX_SEED."""
+    for name in ("steps", "val_every", "checkpoint_every"):
+        value = getattr(cfg, name)
+        if not 1 <= value <= MAX_STEPS:
+            raise ValueError(f"{where}: train.{name} must be 1..{MAX_STEPS}, got {value}")
+    if not (math.isfinite(cfg.lr) and cfg.lr > 0):
+        raise ValueError(f"{where}: train.lr must be a finite number > 0, got {cfg.lr}")
+    if not (math.isfinite(cfg.weight_decay) and cfg.weight_decay >= 0):
+        raise ValueError(f"{where}: train.weight_decay must be a finite number >= 0, got {cfg.weight_decay}")
+    if not 0 <= cfg.seed <= MAX_SEED:
+        raise ValueError(f"{where}: train.seed must be 0..{MAX_SEED}, got {cfg.seed}")

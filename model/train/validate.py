@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import re
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -28,19 +29,31 @@ IMAGES = 4  # the first few validation samples are pictured at every validation
 Metrics = dict[str, dict[str, float]]
 
 
+@dataclass(frozen=True)
+class Validation:
+    """One validation: ``metrics`` per region (NaN where no validation pixel falls in the region),
+    the pictures written under ``RUN_DIR/val/step_XXXXXXX/`` (relative path → RGB uint8 H×5W×3),
+    and how many predictions held a non-finite value (a diverged network's)."""
+
+    metrics: Metrics
+    images: dict[str, np.ndarray]
+    non_finite: int
+
+
 @torch.no_grad()
 def validate(network: FusionNetwork, config: Config, reader: Reader, device: torch.device, run_dir: Path,
-             step: int, images: int = IMAGES) -> tuple[Metrics, dict[str, np.ndarray]]:
-    """Metrics per region (NaN where no validation pixel falls in the region) and the pictures
-    written under ``RUN_DIR/val/step_XXXXXXX/`` (relative path → RGB uint8 H×5W×3)."""
+             step: int, images: int = IMAGES) -> Validation:
+    """Predict every validation sample and score it (see :class:`Validation`)."""
     predictor = Predictor(network, config, device=str(device))
     sums = {region: dict.fromkeys(METRICS, 0.0) for region in REGIONS}
     counts = dict.fromkeys(REGIONS, 0)
     written: dict[str, np.ndarray] = {}
+    non_finite = 0
     for i in range(len(reader)):
         sample = reader[i]
         pred = predictor.predict(sample.left, sample.right, sample.mono, iters=config.train.test_iters,
                                  seed=validation_noise_seed(config.train.seed, i))
+        non_finite += int(not np.isfinite(pred.disparity).all())
         for region in REGIONS:
             mask = sample.regions.get(region)
             if mask is None or not mask.any():
@@ -56,7 +69,7 @@ def validate(network: FusionNetwork, config: Config, reader: Reader, device: tor
             written[relative.as_posix()] = strip
     metrics = {region: {name: (sums[region][name] / counts[region] if counts[region] else math.nan)
                         for name in METRICS} for region in REGIONS}
-    return metrics, written
+    return Validation(metrics, written, non_finite)
 
 
 def _file_stem(name: str) -> str:

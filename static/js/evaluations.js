@@ -1,16 +1,17 @@
 // The evaluations list (refreshed every two seconds) and the launch form, which posts to the API.
 import { api, el, poll } from "./api.js";
-import { sessionEnded } from "./session_ended.js";
+import { keyboardHelp } from "./help.js";
+import { launch } from "./launch_form.js";
+import { fixed } from "./runs.js";
 
 const root = document.getElementById("evaluations");
 const table = document.getElementById("evaluation-list");
 const form = document.getElementById("launch-evaluation");
 
-const fixed = (v) => (typeof v === "number" ? v.toFixed(2) : "—");
 
 function headline(evaluation) {
   const first = evaluation.methods[0];
-  return fixed(evaluation.summary?.headline?.[first]?.all?.epe);
+  return fixed(evaluation.summary?.headline?.[first]?.all?.epe, 2);
 }
 
 function row(e) {
@@ -21,37 +22,54 @@ function row(e) {
     el("td", {}, link), el("td", {}, el("span", { className: `state ${e.state}`, title: e.error ?? "" }, e.state)),
     el("td", {}, el("progress", { max: 1, value: e.progress ?? 0 })),
     el("td", {}, el("code", {}, e.format), ` ${e.dataset}`), el("td", {}, e.methods.join(", ")),
-    el("td", {}, e.resolution ?? ""), el("td", { className: "num" }, String(e.summary?.samples ?? "—")),
+    el("td", {}, e.resolution ?? ""), el("td", {}, e.checkpoint ?? "—"),
+    el("td", { className: "num" }, String(e.summary?.samples ?? "—")),
     el("td", { className: "num" }, headline(e)), el("td", {}, e.created_by ?? "—"), el("td", {}, samples));
 }
 
 async function refresh() {
   const { items } = await api(root.dataset.src);
   table.tBodies[0].replaceChildren(...(items.length ? items.map(row)
-    : [el("tr", {}, el("td", { colSpan: 10 }, "No evaluations yet."))]));
+    : [el("tr", {}, el("td", { colSpan: 11 }, "No evaluations yet."))]));
 }
 
 function launchBody() {
   const f = form.elements;
-  const body = {};
-  for (const name of ["run", "data", "format", "resolution", "checkpoint", "predictions", "align"]) {
-    body[name] = f[name].value.trim() || null;
-  }
+  const body = { resolution: f.resolution.value || null, align: f.align.value };
   body.methods = [...form.querySelectorAll("input[name=methods]:checked")].map((i) => i.value);
+  if (f.source.value === "folder") {
+    body.data = { root: f.data_root.value, path: f.data_path.value.trim(), format: f.data_format.value };
+  } else if (f.run.value) {
+    body.run = Number(f.run.value);
+  }
+  if (f.checkpoint.value) {
+    const [run, checkpoint] = f.checkpoint.value.split(":");
+    body.checkpoint = { run: Number(run), checkpoint };
+  }
+  if (body.methods.includes("predictions")) {
+    body.predictions = { root: f.predictions_root.value, path: f.predictions_path.value.trim() };
+  }
   return body;
 }
 
-const error = document.getElementById("launch-error");
+// The fields of the chosen samples, and the predictions folder only when its method is ticked.
+function showParts() {
+  for (const part of form.querySelectorAll("[data-source]")) part.hidden = part.dataset.source !== form.elements.source.value;
+  form.querySelector("[data-needs=predictions]").hidden = !form.querySelector("input[value=predictions]").checked;
+}
+form.addEventListener("change", showParts);
+showParts();
+
 form.addEventListener("submit", async (event) => {
   event.preventDefault();
-  error.hidden = true;
-  try {
-    const evaluation = await api(form.dataset.src, { method: "POST", body: launchBody() });
-    location.href = `${root.dataset.page}/${evaluation.id}`;
-  } catch (err) {
-    error.textContent = err.message;
-    error.hidden = sessionEnded(err);
-  }
+  const evaluation = await launch(form, launchBody());
+  if (evaluation) location.href = `${root.dataset.page}/${evaluation.id}`;
+});
+
+keyboardHelp([], {
+  note: "Score methods on a run's held-out test split (samples its training never read) or on a folder inside a " +
+    "registered dataset root. fusion, stereo and mono-align use the chosen checkpoint; best and last are pinned to " +
+    "their step when the evaluation is launched. A refused launch names its field under it.",
 });
 
 poll(refresh, 2000);

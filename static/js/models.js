@@ -2,7 +2,8 @@
 // launch form, which posts to the API and opens the new run's page.
 import { api, el, poll } from "./api.js";
 import { duration, fixed, runUrl } from "./runs.js";
-import { sessionEnded } from "./session_ended.js";
+import { keyboardHelp } from "./help.js";
+import { launch, numberOrNull } from "./launch_form.js";
 
 const root = document.getElementById("models");
 const table = document.getElementById("runs");
@@ -34,7 +35,8 @@ async function refresh() {
   table.tBodies[0].replaceChildren(...(items.length ? items.map(row)
     : [el("tr", {}, el("td", { colSpan: 10 }, "No runs yet."))]));
   document.getElementById("current-model").textContent = current
-    ? `Current model: run ${current.run}, step ${current.step} (${current.checkpoint})`
+    ? `Current model: run ${current.run}, ${current.best ? "best checkpoint" : current.file}` +
+      (current.step == null ? "" : ` (step ${current.step})`)
     : "Current model: none promoted yet.";
 }
 
@@ -44,10 +46,17 @@ compare.addEventListener("click", () => {
 
 function launchBody() {
   const f = form.elements;
-  const body = {};
-  for (const name of ["preset", "crop", "devices", "split", "init_checkpoint"]) body[name] = f[name].value.trim();
-  for (const name of ["steps", "batch", "iters", "nproc", "seed"]) body[name] = f[name].value ? Number(f[name].value) : null;
-  body.lr = f.lr.value ? Number(f.lr.value) : null;
+  const body = { preset: f.preset.value, devices: f.devices.value, split: f.split.value.trim() };
+  for (const name of ["steps", "batch", "lr", "iters", "nproc", "seed"]) body[name] = numberOrNull(f[name]);
+  body.crop = f.crop.value.trim() || null;
+  if (f.init.value) {
+    const [run, checkpoint] = f.init.value.split(":");
+    body.init = { run: Number(run), checkpoint };
+  }
+  if (f.source.value === "folder") {
+    body.data = { root: f.data_root.value, path: f.data_path.value.trim(), format: f.data_format.value };
+    return body;
+  }
   body.video_ids = [...f.video_ids.selectedOptions].map((o) => Number(o.value));
   body.illusion_types = [...form.querySelectorAll("input[name=illusion_types]:checked")].map((i) => i.value);
   body.kinds = [...form.querySelectorAll("input[name=kinds]:checked")].map((i) => i.value);
@@ -56,21 +65,22 @@ function launchBody() {
 }
 
 if (form) {
-  const error = document.getElementById("launch-error");
+  // The data source shows the fields of the chosen one: the database's filters or a registered folder.
+  const showSource = () => {
+    for (const part of form.querySelectorAll("[data-source]")) part.hidden = part.dataset.source !== form.elements.source.value;
+  };
+  for (const radio of form.elements.source) radio.addEventListener("change", showSource);
   form.addEventListener("submit", async (event) => {
     event.preventDefault();
-    error.hidden = true;
-    const button = form.querySelector("button[type=submit]");
-    button.disabled = true;
-    try {
-      const run = await api(form.dataset.src, { method: "POST", body: launchBody() });
-      location.href = runUrl(root.dataset.runPage, run.run);
-    } catch (err) {
-      error.textContent = err.message;
-      error.hidden = sessionEnded(err);
-      button.disabled = false;
-    }
+    const run = await launch(form, launchBody());
+    if (run) location.href = runUrl(root.dataset.runPage, run.run);
   });
 }
+
+keyboardHelp([], {
+  note: "Tick two or more runs to compare their curves. Launch fields left empty take the preset's values; a " +
+    "refused launch names its field under it (a crop must fit the smallest image of the data and the machine's " +
+    "memory). Start from a run's best or last checkpoint to fine-tune.",
+});
 
 poll(refresh, 2000);

@@ -11,6 +11,9 @@ export const HEADERS = Object.freeze({ "Accept": "application/json", "X-CSRFToke
 // page-wide notice says so, and `sessionEnded` tells the page to leave out a message of its own.
 export function failure(status, data = {}, statusText = "") {
   const err = new Error(data.error ?? `${status} ${statusText}`);
+  // A launch form's refusal names its field and the reason alone (launch_form.js shows it there).
+  err.field = data.field;
+  err.reason = data.reason;
   if (status === 401) {
     err.sessionEnded = true;
     showSessionEnded();

@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from dataset.models import IllusionType
+from model.launch import openapi_schemas
 
 
 def _ref(name: str) -> dict[str, str]:
@@ -235,6 +236,8 @@ def openapi_document() -> dict[str, Any]:
                     "annotation_version": {"type": "integer"}, "submitted": {"type": "boolean"},
                     "illusion_type": {"enum": [*_ILLUSION_TYPES, None]}, "regions": {"type": "array", "items": _ref("Region")},
                     "lease": {"type": "object"}, "prev_id": {"type": ["integer", "null"]},
+                    "returned": {"type": ["object", "null"], "description": "why a curator sent the frame back: "
+                                                                              "sample_id, reason, by, at, annotator"},
                     "next_id": {"type": ["integer", "null"]}, "embedding_ready": {"type": "boolean"}}}]},
                 "RLE": {"type": "object", "description": "COCO run-length encoding (pycocotools)",
                         "properties": {"size": {"type": "array", "items": {"type": "integer"}}, "counts": {"type": "string"}}},
@@ -269,18 +272,6 @@ def openapi_document() -> dict[str, Any]:
                     "reason": {"type": ["string", "null"]}, "current": {"type": "boolean"}}},
                 "RunList": {"type": "object", "properties": {"items": {"type": "array", "items": _ref("Run")},
                                                              "current": {"type": ["object", "null"]}}},
-                "RunLaunch": {"type": "object", "properties": {
-                    "preset": {"enum": ["lite", "paper"]}, "steps": {"type": "integer"}, "batch": {"type": "integer"},
-                    "lr": {"type": "number"}, "crop": {"type": "string", "description": "HxW pixels, e.g. 320x736"},
-                    "iters": {"type": "integer"}, "devices": {"type": "string", "description": "auto, cpu, cuda, cuda:0,1"},
-                    "nproc": {"type": "integer"}, "nnodes": {"type": "integer"}, "rdzv_endpoint": {"type": "string"},
-                    "video_ids": {"type": "array", "items": {"type": "integer"}},
-                    "illusion_types": {"type": "array", "items": {"enum": _ILLUSION_TYPES}},
-                    "kinds": {"type": "array", "items": {"enum": ["synthesized", "capture"]}},
-                    "qa_ok": {"type": "boolean"},
-                    "format": {"type": "string", "description": "database (default) or a reader format"},
-                    "data_root": {"type": "string"}, "split": {"type": "string", "description": "train=0.8,val=0.1,test=0.1"},
-                    "seed": {"type": "integer"}, "init_checkpoint": {"type": "string"}}},
                 "RunMetrics": {"type": "object", "properties": {
                     "run": {"type": "integer"},
                     "step": {"type": "array", "items": {"type": "object", "description": "step, loss, lr, samples_per_s"}},
@@ -290,23 +281,18 @@ def openapi_document() -> dict[str, Any]:
                     "progress": {"type": ["number", "null"]}, "error": {"type": ["string", "null"]},
                     "dataset": {"type": "string"}, "format": {"type": "string"},
                     "methods": {"type": "array", "items": {"type": "string"}}, "resolution": {"type": "string"},
-                    "checkpoint": {"type": ["string", "null"]}, "report_dir": {"type": ["string", "null"]},
+                    "checkpoint": {"type": ["string", "null"], "description": "run · file, step (never a path)"},
+                    "run": {"type": ["integer", "null"]}, "step": {"type": ["integer", "null"]},
                     "summary": {"type": "object", "description": "samples, failed, headline: method → region → {epe, bad2}"},
                     "has_results": {"type": "boolean", "description": "per-sample rows for the Samples pages"}}},
                 "EvaluationList": _list("Evaluation"),
-                "EvaluationLaunch": {"type": "object", "properties": {
-                    "data": {"type": "string", "description": "a dataset folder; without it, the run's test split"},
-                    "format": {"enum": ["native", "authors", "booster", "middlebury", "kitti", "sceneflow"]},
-                    "run": {"type": "integer"}, "methods": {"type": "array", "items": {"enum": [
-                        "fusion", "stereo", "mono_align", "mono_gt_align", "sgbm", "predictions"]}},
-                    "checkpoint": {"type": "string", "description": "default: the current model"},
-                    "predictions": {"type": "string"}, "mono": {"type": "string"},
-                    "resolution": {"enum": ["full", "half", "quarter"]}, "align": {"enum": ["lsq", "median"]},
-                    "max_disparity": {"type": "integer"}, "iters": {"type": "integer"}, "kitti_png": {"type": "boolean"}}},
-                "Promote": {"type": "object", "properties": {"checkpoint": {
+                "Promote": {"type": "object", "additionalProperties": False, "properties": {"checkpoint": {
                     "type": "string", "description": "best (default), last, or a file name from the run's checkpoints"}}},
+                # The launch schemas, as the API validates them (model/launch.py).
+                **openapi_schemas(),
                 "CurrentModel": {"type": "object", "properties": {
-                    "checkpoint": {"type": "string"}, "run": {"type": ["integer", "null"]}, "step": {"type": "integer"}}},
+                    "run": {"type": ["integer", "null"]}, "file": {"type": "string"}, "step": {"type": ["integer", "null"]},
+                    "best": {"type": "boolean"}}},
                 "DeleteFrame": {"type": "object", "properties": {"reason": {"enum": ["redundant", "imperceptible"]}}},
                 "Propagate": {"type": "object", "required": ["pair", "kind", "mask"], "properties": {
                     "pair": {"type": "integer"}, "kind": {"enum": ["illusion", "support"]}, "mask": _ref("RLE"),

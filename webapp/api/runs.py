@@ -11,8 +11,9 @@ from flask_login import current_user
 
 from dataset.models import Role, User
 from dataset.services import training
-from dataset.services.errors import InvalidInput, NotFound
+from dataset.services.errors import NotFound
 from model import registry
+from model.launch import FieldError, RunLaunch, validate
 from webapp.api.blueprint import api, int_arg, json_body
 from webapp.auth import requires
 from webapp.jobs import runs as run_control
@@ -42,20 +43,9 @@ def list_runs() -> ResponseReturnValue:
 @api.post("/runs")
 @requires(Role.admin)
 def launch_run() -> ResponseReturnValue:
-    body = json_body()
-    selection = training.DataSelection(
-        video_ids=tuple(_ints(body, "video_ids")), illusion_types=tuple(_strings(body, "illusion_types")),
-        kinds=tuple(_strings(body, "kinds")), qa_ok=bool(body.get("qa_ok", False)),
-        format=str(body.get("format") or training.DATABASE), root=body.get("data_root") or None)
-    launch = training.Launch(
-        nproc=_int(body, "nproc", 1), devices=str(body.get("devices") or "auto"),
-        nnodes=_int(body, "nnodes", 1), rdzv_endpoint=body.get("rdzv_endpoint") or None,
-        init_checkpoint=body.get("init_checkpoint") or None,
-        split=training.parse_split(str(body.get("split") or training.DEFAULT_SPLIT)), seed=_int(body, "seed", 0))
-    overrides = run_control.overrides_from(steps=_opt_int(body, "steps"), batch=_opt_int(body, "batch"),
-                               lr=_opt_float(body, "lr"), crop=body.get("crop") or None, iters=_opt_int(body, "iters"))
-    run = run_control.launch(runtime(), g.db, preset=str(body.get("preset") or "lite"), overrides=overrides,
-                             selection=selection, launch=launch, user=_user())
+    """Body: :class:`model.launch.RunLaunch` (published in the OpenAPI document)."""
+    request_ = validate(RunLaunch, json_body(), runtime().settings)
+    run = run_control.launch_request(runtime(), g.db, request_, _user())
     g.db.commit()
     return _run_json(run.id), 202
 
@@ -92,63 +82,20 @@ def resume_run(run_id: int) -> ResponseReturnValue:
 @api.post("/runs/<int:run_id>/promote")
 @requires(Role.admin)
 def promote_run(run_id: int) -> ResponseReturnValue:
-    """Body ``{"checkpoint": "best" | "last" | a file name from the run's checkpoints}``."""
-    which = str((request.get_json(silent=True) or {}).get("checkpoint") or "best")
-    if which not in run_control.CHECKPOINT_CHOICES:
-        which = _checkpoint(run_id, which)["path"]
+    """Body ``{"checkpoint": "best" | "last" | a file name from the run's checkpoints}`` (default best)."""
+    body = request.get_data() and json_body()
+    which = (body or {}).get("checkpoint", "best")
+    if not isinstance(which, str):
+        raise FieldError("checkpoint", "expected best, last or a file name of the run's checkpoints")
     return run_control.promote(runtime(), run_id, which, _user())
 
 
 @api.get("/runs/<int:run_id>/checkpoints/<name>")
 @requires(Role.curator)
 def download_checkpoint(run_id: int, name: str) -> ResponseReturnValue:
-    found = _checkpoint(run_id, name)
-    return send_file(found["path"], as_attachment=True, download_name=f"run{run_id}_{name}", max_age=0)
-
-
-def _checkpoint(run_id: int, name: str) -> dict[str, Any]:
-    """One of the run's checkpoint files by name (never a path the caller makes up)."""
-    training.get_run(g.db, run_id)
-    files = training.checkpoint_files(training.run_dir(runtime().settings.runs_dir, run_id))
-    found = next((f for f in files if f["name"] == name), None)
+    """One of the run's checkpoint files by name (never a path the caller makes up, never a link)."""
+    run = training.get_run(g.db, run_id)
+    found = next((f for f in registry.run_checkpoints(runtime().settings.runs_dir, run.id) if f.name == name), None)
     if found is None:
         raise NotFound(f"run {run_id} has no checkpoint {name!r}")
-    return found
-
-
-def _int(body: dict[str, Any], key: str, default: int) -> int:
-    value = _opt_int(body, key)
-    return default if value is None else value
-
-
-def _opt_int(body: dict[str, Any], key: str) -> int | None:
-    value = body.get(key)
-    if value in (None, ""):
-        return None
-    if isinstance(value, bool) or not isinstance(value, int | str) or not str(value).strip().lstrip("-").isdigit():
-        raise InvalidInput(f"{key} must be an integer")
-    return int(value)
-
-
-def _opt_float(body: dict[str, Any], key: str) -> float | None:
-    value = body.get(key)
-    if value in (None, ""):
-        return None
-    try:
-        return float(value)
-    except (TypeError, ValueError):
-        raise InvalidInput(f"{key} must be a number") from None
-
-
-def _ints(body: dict[str, Any], key: str) -> list[int]:
-    values = body.get(key) or []
-    if not isinstance(values, list):
-        raise InvalidInput(f"{key} must be a list of integers")
-    return [v for v in (_opt_int({key: v}, key) for v in values) if v is not None]
-
-
-def _strings(body: dict[str, Any], key: str) -> list[str]:
-    values = body.get(key) or []
-    if not isinstance(values, list) or not all(isinstance(v, str) for v in values):
-        raise InvalidInput(f"{key} must be a list of strings")
-    return values
+    return send_file(found.path, as_attachment=True, download_name=f"run{run_id}_{name}", max_age=0)

@@ -132,6 +132,16 @@ def train_benchmark(as_json: bool, steps: int) -> None:
     _report(run_train_bench(steps=steps), as_json)
 
 
+@bench.command("memory")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def memory_benchmark(as_json: bool) -> None:
+    """The lite trainer's peak memory at several crops and iterations, the memory model's fit to them,
+    and the estimate launches are checked with (model/fit.py's MEMORY_MB)."""
+    from webapp.benchmarks.memory import run_memory_bench
+
+    _report(run_memory_bench(), as_json)
+
+
 @bench.command("model")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("--repeats", type=click.IntRange(min=1), default=2, show_default=True)

@@ -7,14 +7,13 @@ from pathlib import Path
 
 import click
 
-from dataset.models import Job
 from dataset.readers import READER_FORMATS
-from dataset.services import training
+from dataset.services.evaluations import dataset_label
 from model.align import ALIGN_RULES
 from model.evaluate import RESOLUTIONS
-from model.evaluation import DEFAULT_METHODS, evaluation_params
+from model.evaluation import DEFAULT_METHODS, EvalShellOptions, evaluation_params
+from model.launch import EvaluationLaunch, validate
 from model.methods import METHODS
-from model.registry import current_checkpoint
 from webapp.cli.errors import service_errors
 from webapp.cli.running import run_job, run_options
 from webapp.cli.state import CliState, pass_state
@@ -56,27 +55,20 @@ def evaluate_cmd(state: CliState, data: Path | None, fmt: str | None, methods: t
     """Evaluate METHODs: EPE and bad-x (and depth metrics where a camera is known) per region."""
     if data is not None and fmt is None:
         raise click.UsageError("--data needs --format")
-    settings = state.settings
-    needs_network = any(m.replace("-", "_") in ("fusion", "stereo", "mono_align")
-                        for m in (methods or DEFAULT_METHODS))
-    if checkpoint is None and needs_network:
-        checkpoint = current_checkpoint(settings)
-    run_dir = training.run_dir(settings.runs_dir, run_id) if run_id is not None else None
-    with service_errors():
-        try:
-            params = evaluation_params(
-                data=data, format=fmt, methods=list(methods), out=out, checkpoint=checkpoint,
-                predictions=predictions, mono=mono, resolution=resolution, align=align_rule,
-                max_disparity=max_disparity, kitti_png=kitti_png, iters=iters, run_dir=run_dir,
-                reader_options={"min_disparity": min_disparity} if min_disparity is not None else None)
-        except ValueError as exc:
-            raise click.ClickException(str(exc)) from None
-    job_id = run_job(state, "evaluate", params,
-                     f"evaluate {', '.join(params['methods'])} on {params['data'] or 'the test split'}",
+    rt = state.runtime
+    body = {"methods": list(methods) or list(DEFAULT_METHODS), "run": run_id, "resolution": resolution,
+            "align": align_rule, "max_disparity": max_disparity, "kitti_png": kitti_png, "iters": iters}
+    shell = EvalShellOptions(data_dir=data, data_format=fmt, checkpoint=checkpoint, predictions=predictions,
+                             mono=mono, out=out,
+                             reader_options={"min_disparity": min_disparity} if min_disparity is not None else {})
+    with service_errors(), rt.sessions() as s:
+        request = validate(EvaluationLaunch, {k: v for k, v in body.items() if v is not None})
+        params = evaluation_params(request, state.settings, s, shell)
+        s.commit()
+    job_id = run_job(state, "evaluate", params, f"evaluate {', '.join(params['methods'])} on {dataset_label(params)}",
                      wait=wait, here=here, quiet=as_json)
     if wait or here:
-        with state.runtime.sessions() as s:
-            report_dir = Path(s.get(Job, job_id).result["out"])
+        report_dir = Path(params["out"]) if params["out"] else state.settings.home / "evaluations" / str(job_id)
         if as_json:
             click.echo((report_dir / "report.json").read_text())
         else:

@@ -6,6 +6,7 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -54,6 +55,11 @@ def ingest(state: CliState, paths: tuple[Path, ...], fps: float, source: str | N
         wait_for_jobs(state, job_ids)
 
 
+def brief_result(result: dict[str, Any]) -> str:
+    """A job's result in one short line: its plain figures (the whole result is in `jobs show`)."""
+    return json.dumps({k: v for k, v in result.items() if isinstance(v, int | float | str | bool | None)})
+
+
 def wait_for_jobs(state: CliState, job_ids: list[int], *, quiet: bool = False) -> None:
     """Show one progress bar over ``job_ids`` until all finish; a failure is reported and exits 1.
     ``quiet`` writes the closing lines to stderr, keeping stdout for a command's ``--json``."""
@@ -74,7 +80,11 @@ def wait_for_jobs(state: CliState, job_ids: list[int], *, quiet: bool = False) -
             time.sleep(0.25)
     failed = [j for j in jobs if j.state.value != "succeeded"]
     for job in jobs:
-        click.echo(f"job {job.id}: {job.state.value} {json.dumps(job.result) if job.result else job.error or ''}", err=quiet)
+        click.echo(f"job {job.id}: {job.state.value} {brief_result(job.result) if job.result else job.error or ''}",
+                   err=quiet)
+        if job.result and (copy := job.result.get("copy_of")):
+            click.echo(f"  looks like a copy of video {copy['video_id']} ({copy['video_name']}); kept in the same "
+                       "scene group", err=quiet)
     if failed:
         raise click.ClickException(f"{len(failed)} of {plural(len(jobs), 'job')} did not succeed: "
                                    + "; ".join(f"job {j.id}: {j.error}" for j in failed))

@@ -14,6 +14,7 @@ from dataset.db import transaction
 from dataset.models import IllusionType
 from dataset.services import training
 from model import registry
+from model.launch import RunLaunch, validate
 from webapp.cli.errors import service_errors
 from webapp.cli.state import CliState, pass_state
 from webapp.jobs import runs as run_control
@@ -60,17 +61,16 @@ def train(state: CliState, preset: str, steps: int | None, batch: int | None, lr
     rt = state.runtime
     if data_root is not None and data_format is None:
         raise click.ClickException("--data needs --format (native, authors, sceneflow, …)")
-    selection = training.DataSelection(
-        video_ids=video_ids, illusion_types=illusion_types, kinds=kinds, qa_ok=qa_ok,
-        format=data_format or training.DATABASE, root=str(data_root.resolve()) if data_root else None)
+    body = {"preset": preset, "steps": steps, "batch": batch, "lr": lr, "crop": crop, "iters": iters,
+            "nproc": nproc, "devices": devices, "split": split, "seed": seed, "video_ids": list(video_ids),
+            "illusion_types": list(illusion_types), "kinds": list(kinds), "qa_ok": qa_ok}
+    shell = run_control.ShellOptions(data_dir=data_root, data_format=data_format, init_path=init_checkpoint,
+                                     nnodes=nnodes, rdzv_endpoint=rdzv_endpoint)
     with service_errors():
-        launch = training.Launch(nproc=nproc, devices=devices, nnodes=nnodes, rdzv_endpoint=rdzv_endpoint,
-                                 init_checkpoint=str(init_checkpoint.resolve()) if init_checkpoint else None,
-                                 split=training.parse_split(split), seed=seed)
-        overrides = run_control.overrides_from(steps=steps, batch=batch, lr=lr, crop=crop, iters=iters)
+        # The command line's own machine is the limit (settings=None): its user chose the worker.
+        request = validate(RunLaunch, {k: v for k, v in body.items() if v is not None})
         with transaction(rt.sessions) as s:
-            run = run_control.launch(rt, s, preset=preset, overrides=overrides, selection=selection,
-                                     launch=launch, user=None)
+            run = run_control.launch_request(rt, s, request, None, shell)
             run_id, job_id = run.id, run.job_id
     click.echo(f"run {run_id}: job {job_id} on the train queue "
                f"(`illusion-studio --data-dir {state.settings.home} worker --queue train` runs it)", err=True)
@@ -183,10 +183,42 @@ def resume(state: CliState, run_id: int) -> None:
 
 @runs.command("promote")
 @click.argument("run_id", type=int)
-@click.option("--checkpoint", "which", default="best", show_default=True, help="best, last, or a checkpoint file.")
+@click.option("--checkpoint", "which", default="best", show_default=True,
+              help="best, last, a file name of the run's checkpoints, or a checkpoint file's path (with a /).")
 @pass_state
 def promote(state: CliState, run_id: int, which: str) -> None:
     """Make a run's checkpoint the current model (what `predict` and evaluation use by default)."""
+    path = Path(which).expanduser() if "/" in which else None
     with service_errors():
-        doc = run_control.promote(state.runtime, run_id, which, None)
+        doc = run_control.promote(state.runtime, run_id, which, None, path=path)
     click.echo(json.dumps(doc), file=sys.stdout)
+
+
+@click.group()
+def checkpoints() -> None:
+    """Fusion-model checkpoint files."""
+
+
+@checkpoints.command("upgrade")
+@click.argument("paths", nargs=-1, type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--all", "every", is_flag=True, help="Every checkpoint under <data dir>/runs.")
+@pass_state
+def upgrade(state: CliState, paths: tuple[Path, ...], every: bool) -> None:
+    """Rewrite checkpoints of an earlier release (their trainer state held numpy objects) so that
+    they load with weights-only loading, the only loading there is. This one step unpickles the
+    files: name only checkpoints you trust."""
+    from model.checkpoint import upgrade_checkpoint
+
+    if every:
+        paths = (*paths, *sorted(state.settings.runs_dir.glob("*/checkpoints/*.pt")))
+    if not paths:
+        raise click.UsageError("name checkpoint files, or --all for every run's")
+    for path in paths:
+        if path.is_symlink():
+            click.echo(f"{path}: a symbolic link, skipped")
+            continue
+        try:
+            changed = upgrade_checkpoint(path)
+        except ValueError as exc:
+            raise click.ClickException(str(exc)) from None
+        click.echo(f"{path}: {'upgraded' if changed else 'already loads safely'}")

@@ -5,104 +5,147 @@ The run row and its train job commit together; the job reaches the ``train`` que
 
 from __future__ import annotations
 
-import re
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sqlalchemy.orm import Session
 
 from dataset.db import transaction
-from dataset.models import TrainingRun, User
+from dataset.models import JobState, TrainingRun, User
 from dataset.services import audit, training
 from dataset.services import jobs as job_rows
-from dataset.services.errors import InvalidInput
-from model import registry
+from dataset.services.dataset_roots import folder_label, resolve_folder
+from dataset.services.errors import Conflict, InvalidInput, NotFound
+from model import launcher, registry
+from model.fit import check_fit
 from model.jobs import resolve_config
+from model.launch import FieldError, RunLaunch
+from model.presets import Config
 
 if TYPE_CHECKING:
     from webapp.runtime import Runtime
 
-_STEP = re.compile(r"step_(\d+)\.pt$")
-CHECKPOINT_CHOICES = ("best", "last")
+@dataclass(frozen=True)
+class ShellOptions:
+    """What only the command line may add to a launch (its user has a shell): server paths and
+    multi-node rendezvous."""
+
+    data_dir: Path | None = None
+    data_format: str | None = None
+    init_path: Path | None = None
+    nnodes: int = 1
+    rdzv_endpoint: str | None = None
 
 
-def parse_crop(text: str) -> tuple[int, int]:
-    """``320x736`` → (H, W) in pixels."""
-    try:
-        height, width = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise InvalidInput(f"crop {text!r}: expected HxW in pixels, e.g. 320x736") from None
-    if height <= 0 or width <= 0:
-        raise InvalidInput(f"crop {text!r}: height and width must be positive")
-    return height, width
-
-
-def overrides_from(*, steps: int | None, batch: int | None, lr: float | None, crop: str | None,
-                   iters: int | None) -> dict[str, Any]:
-    """The preset overrides the command line and the launch form share (dotted TrainConfig names)."""
-    values = {"train.steps": steps, "train.batch_size": batch, "train.lr": lr,
-              "train.crop": parse_crop(crop) if crop else None, "train.train_iters": iters}
-    return {key: value for key, value in values.items() if value is not None}
+def launch_request(rt: Runtime, session: Session, request: RunLaunch, user: User | None,
+                   shell: ShellOptions | None = None) -> TrainingRun:
+    """A validated launch (API, form, command line): names resolved, then :func:`launch`."""
+    shell = shell or ShellOptions()
+    if request.data is not None:
+        folder = resolve_folder(rt.settings.dataset_roots, request.data.root, request.data.path)
+        selection = training.DataSelection(format=request.data.format, root=str(folder),
+                                           label=folder_label(request.data.root, request.data.path))
+    elif shell.data_dir is not None:
+        selection = training.DataSelection(format=shell.data_format or "", root=str(shell.data_dir.resolve()),
+                                           label=shell.data_dir.name)
+    else:
+        selection = training.DataSelection(video_ids=tuple(request.video_ids), illusion_types=tuple(request.illusion_types),
+                                           kinds=tuple(request.kinds), qa_ok=request.qa_ok)
+    init_path, init_label = (str(shell.init_path.resolve()), shell.init_path.name) if shell.init_path else (None, None)
+    if request.init is not None:
+        found = registry.pin(_named(rt, session, request.init.run, request.init.checkpoint, field="init"))
+        init_path, init_label = str(found.path), found.label
+    settings_launch = training.Launch(
+        nproc=request.nproc, devices=request.devices, init_checkpoint=init_path, init_label=init_label,
+        nnodes=shell.nnodes, rdzv_endpoint=shell.rdzv_endpoint, split=training.parse_split(request.split),
+        seed=request.seed)
+    return launch(rt, session, preset=request.preset, overrides=request.overrides(), selection=selection,
+                  launch=settings_launch, user=user)
 
 
 def launch(rt: Runtime, session: Session, *, preset: str, overrides: dict[str, Any],
            selection: training.DataSelection, launch: training.Launch, user: User | None) -> TrainingRun:
-    """Create the run (validated, its dataset version pinned, ``run.json`` written) and queue its job."""
+    """Create the run (its dataset version pinned, checked to fit the data and the machine,
+    ``run.json`` written) and queue its job."""
     config = resolve_config(preset, {**overrides, "train.seed": launch.seed})
+    version = training.pin_selection(session, rt.media, selection)
+    device = launch.devices if launch.devices != "auto" else rt.settings.train_devices
+    check_fit(Config.from_dict(config), nproc=launch.nproc, device=device, memory_gb=rt.settings.train_memory_gb,
+              smallest_image=training.smallest_image(session, version, selection))
     run = training.create_run(session, rt.media, rt.settings.runs_dir, preset=preset, config=config,
-                              selection=selection, launch=launch, user=user)
+                              selection=selection, launch=launch, version=version, user=user)
     run.job_id = rt.submit(session, "train", {"run_id": run.id}, user).id
     return run
 
 
 def cancel(rt: Runtime, run_id: int, user: User | None) -> None:
+    """Stop the run in whatever state a process of it lives: its job stops the trainers after they
+    checkpoint the step they are at; without a live job (it failed, its worker died) the trainers
+    are ended here, from the process group ``trainers.json`` records."""
+    directory = training.run_dir(rt.settings.runs_dir, run_id)
+    alive = bool(launcher.recorded_members(directory))
     with transaction(rt.sessions) as s:
-        training.request_cancel(s, training.get_run(s, run_id), _attached(s, user))
+        run = training.get_run(s, run_id)
+        training.request_cancel(s, run, _attached(s, user), trainers_alive=alive)
+        handled = run.job is not None and run.job.state == JobState.running
+    if alive:
+        launcher.request_stop(directory)
+        if not handled:
+            launcher.stop_recorded(directory)
 
 
 def resume(rt: Runtime, run_id: int, user: User | None) -> None:
     """Queue the run's job again; the engine resumes from the run's newest checkpoint."""
+    if launcher.recorded_members(training.run_dir(rt.settings.runs_dir, run_id)):
+        raise Conflict(f"run {run_id}'s trainers are still stopping; resume it once they are gone")
     with transaction(rt.sessions) as s:
         job_id = training.prepare_resume(s, training.get_run(s, run_id), _attached(s, user))
         job_rows.mark_for_retry(s, job_id)
     rt.queue.enqueue(job_id, "train")
 
 
-def promote(rt: Runtime, run_id: int, which: str, user: User | None) -> dict[str, Any]:
-    """Make the run's ``best`` or ``last`` checkpoint, or a checkpoint file, the current model."""
+def promote(rt: Runtime, run_id: int, which: str, user: User | None, *, path: Path | None = None) -> dict[str, Any]:
+    """Make the run's ``best`` or ``last`` checkpoint, or one of its files by name — or, from the
+    command line, the checkpoint file ``path`` — the current model. Refused when its weights are
+    not finite (a diverged run's)."""
+    from model.checkpoint import load_checkpoint, weights_finite
+
     with transaction(rt.sessions) as s:
         run = training.get_run(s, run_id)
-        path, step = _checkpoint(rt, run, which)
-        doc = registry.promote(rt.settings, path, run=run.id, step=step)
+        if path is None:
+            target: registry.CheckpointFile | Path = _checkpoint_of(rt, run, which, field="checkpoint")
+            file, label = target.path, target.label
+        else:
+            target = file = path
+            label = str(path)
+        try:
+            payload = load_checkpoint(file, label=label)
+        except ValueError as exc:
+            raise FieldError("checkpoint", str(exc)) from None
+        if not weights_finite(payload):
+            raise InvalidInput(f"{label} has non-finite weights (the run diverged); promote another checkpoint")
+        step = None if path is None else int(payload["step"])
+        doc = registry.promote(rt.settings, target, run=run.id, step=step)
         if user is not None:
-            audit.record(s, user.id, "run.promote", "run", run.id, checkpoint=doc["checkpoint"], step=step)
+            audit.record(s, user.id, "run.promote", "run", run.id, checkpoint=doc["file"], step=doc["step"])
     return doc
 
 
-def _checkpoint(rt: Runtime, run: TrainingRun, which: str) -> tuple[Path, int]:
-    files = training.checkpoint_files(training.run_dir(rt.settings.runs_dir, run.id))
-    if which == "best":
-        best = next((f for f in files if f["name"] == "best.pt"), None)
-        if best is None or run.best_step is None:
-            raise InvalidInput(f"run {run.id} has no best checkpoint yet: it appears after the first validation")
-        return Path(best["path"]), run.best_step
-    if which == "last":
-        last = next((f for f in files if f["step"] is not None), None)
-        if last is None:
-            raise InvalidInput(f"run {run.id} has no checkpoint yet")
-        return Path(last["path"]), last["step"]
-    path = Path(which).expanduser()
-    if not path.is_file():
-        raise InvalidInput(f"checkpoint {which!r}: expected best, last or a checkpoint file")
-    match = _STEP.search(path.name)
-    if match:
-        return path, int(match.group(1))
-    from model.checkpoint import load_checkpoint
-
+def _named(rt: Runtime, session: Session, run_id: int, which: str, *, field: str) -> registry.CheckpointFile:
+    """A run's checkpoint named in a launch body; a wrong run or name is that field's error."""
     try:
-        return path, int(load_checkpoint(path)["step"])
-    except (ValueError, KeyError, OSError) as exc:
-        raise InvalidInput(f"checkpoint {path}: {exc}") from None
+        run = training.get_run(session, run_id)
+    except NotFound as exc:
+        raise FieldError(field, str(exc)) from None
+    return _checkpoint_of(rt, run, which, field=field)
+
+
+def _checkpoint_of(rt: Runtime, run: TrainingRun, which: str, *, field: str) -> registry.CheckpointFile:
+    try:
+        return registry.run_checkpoint(rt.settings.runs_dir, run.id, which, best_step=run.best_step)
+    except NotFound as exc:
+        raise FieldError(field, str(exc)) from None
 
 
 def _attached(session: Session, user: User | None) -> User | None:

@@ -25,11 +25,11 @@ from dataset.readers.base import resize_disparity
 from dataset.samples import load_output
 from dataset.services import evaluations, sample_review, training
 from dataset.services.errors import NotFound
+from model import registry
 from model.align import ALIGN_RULES
 from model.evaluate import RESOLUTIONS
 from model.evaluation import DEFAULT_METHODS
 from model.methods import METHODS
-from model.registry import current_model
 from model.report import DEPTH_METRICS, TABLE_METRICS
 from webapp.auth import requires
 from webapp.runtime import runtime
@@ -41,10 +41,12 @@ bp = Blueprint("evaluations", __name__)
 @requires(Role.curator)
 def index() -> ResponseReturnValue:
     """The launch form and every evaluation with its state and progress (live, from the API)."""
+    settings = runtime().settings
     runs = [r.id for r in training.list_runs(g.db)]
     return render_template("evaluations.html", formats=READER_FORMATS, methods=METHODS, default_methods=DEFAULT_METHODS,
                            resolutions=list(RESOLUTIONS), align_rules=ALIGN_RULES, runs=runs,
-                           current=current_model(runtime().settings))
+                           current=registry.current_model(settings), roots=sorted(settings.dataset_roots),
+                           checkpoints=registry.named_checkpoints(g.db, settings.runs_dir))
 
 
 @bp.get("/evaluations/<int:evaluation_id>")

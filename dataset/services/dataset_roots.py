@@ -1,0 +1,34 @@
+"""Dataset folders a request may name: a root an admin registered in settings (``dataset_roots``,
+by name) and a relative path inside it — never a server path.
+
+A folder that does not exist and one that is not allowed (``..``, a symbolic link out of the root,
+an absolute path) get the same answer, so a request learns nothing about the server's files.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path, PurePosixPath
+
+from dataset.services.errors import InvalidInput
+
+
+def folder_label(root: str, path: str = "") -> str:
+    """How answers name a folder: ``root:relative/path``."""
+    return f"{root}:{path}" if path else f"{root}:"
+
+
+def resolve_folder(roots: Mapping[str, Path], root: str, path: str = "") -> Path:
+    """The folder ``path`` inside the registered root ``root``; InvalidInput otherwise."""
+    if root not in roots:
+        known = ", ".join(sorted(roots)) or "none: an admin lists them as dataset_roots in the settings"
+        raise InvalidInput(f"no dataset root named {root!r}; registered roots: {known}")
+    refused = InvalidInput(f"{folder_label(root, path)} is not a folder inside dataset root {root!r}")
+    relative = PurePosixPath(path)
+    if "\0" in path or "\\" in path or relative.is_absolute() or ".." in relative.parts:
+        raise refused
+    base = Path(roots[root]).resolve()
+    folder = (base / relative).resolve()
+    if not folder.is_relative_to(base) or not folder.is_dir():
+        raise refused
+    return folder
