@@ -16,7 +16,7 @@ from typing import Any, Literal
 
 import limits
 from pydantic import Field, ValidationError, field_validator, model_validator
-from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, SettingsConfigDict
+from pydantic_settings import BaseSettings, EnvSettingsSource, PydanticBaseSettingsSource, SettingsConfigDict
 
 ENV_PREFIX = "ILLUSION_STUDIO_"
 HOME_ENV = ENV_PREFIX + "HOME"
@@ -26,6 +26,15 @@ _ROOT_NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")
 
 class SettingsError(ValueError):
     """A settings problem a user can fix; the message is one line naming it."""
+
+
+class _EnvWithoutHome(EnvSettingsSource):
+    """The environment's settings, less the data dir."""
+
+    def __call__(self) -> dict[str, Any]:
+        values = super().__call__()
+        values.pop("home", None)
+        return values
 
 
 class Settings(BaseSettings):
@@ -116,8 +125,9 @@ class Settings(BaseSettings):
         dotenv_settings: PydanticBaseSettingsSource,
         file_secret_settings: PydanticBaseSettingsSource,
     ) -> tuple[PydanticBaseSettingsSource, ...]:
-        # Init kwargs carry the TOML file's values, so the environment must rank above them.
-        return env_settings, init_settings
+        # Init kwargs carry the TOML file's values, so the environment must rank above them —
+        # but for the data dir, which load_settings resolves (--data-dir before $ILLUSION_STUDIO_HOME).
+        return _EnvWithoutHome(settings_cls), init_settings
 
     @field_validator("dataset_roots")
     @classmethod

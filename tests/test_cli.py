@@ -100,3 +100,9 @@ def test_demo_without_serving_builds_a_complete_workspace(tmp_path: Path) -> Non
     assert "no demo training run" in result.stderr and "2 video(s)" in result.stderr
     again = cli("--data-dir", str(home), "demo", "--no-serve", "--videos", "2")
     assert again.returncode == 0 and "jobs succeeded" not in again.stdout  # nothing to do twice
+
+
+def test_data_dir_option_beats_the_environment(tmp_path: Path) -> None:
+    a, b = tmp_path / "a", tmp_path / "b"
+    assert cli("--data-dir", str(b), "init", env={"ILLUSION_STUDIO_HOME": str(a)}).returncode == 0
+    assert (b / "illusion-studio.db").is_file() and not a.exists()

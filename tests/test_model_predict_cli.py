@@ -62,7 +62,7 @@ def test_predict_errors_are_one_line(files: dict[str, Path], tmp_path: Path) -> 
         ([str(files["small"]), "--checkpoint", str(files["checkpoint"]), "--out", str(tmp_path / "d.pfm"),
           "--mono", str(files["mono"])], "differ in size"),
         ([str(files["right"]), "--checkpoint", str(files["checkpoint"]), "--out", str(tmp_path / "d.pfm")],
-         "needs mono"),
+         "pass --mono FILE"),
         ([str(files["right"]), "--checkpoint", str(tmp_path / "none.pt"), "--out", str(tmp_path / "d.pfm")],
          "does not exist"),
         ([str(files["right"]), "--checkpoint", str(files["checkpoint"]), "--out", str(tmp_path / "d.pfm"),

@@ -6,7 +6,7 @@ import secrets
 from pathlib import Path
 from typing import Any
 
-from flask import Flask, g, make_response, render_template
+from flask import Flask, abort, g, jsonify, make_response, render_template, request
 from flask_wtf.csrf import CSRFError
 from werkzeug.exceptions import HTTPException
 from werkzeug.routing import IntegerConverter, Map
@@ -19,6 +19,8 @@ from dataset.settings import Settings
 from dataset.wording import plural
 from webapp.auth import init_auth, is_api_request, json_error
 from webapp.headers import init_headers
+from webapp.json_provider import FiniteJSONProvider
+from webapp.redact import init_redaction
 from webapp.runtime import Runtime
 from webapp.throttle import init_throttle
 
@@ -32,6 +34,11 @@ class DatabaseInt(IntegerConverter):
 
 
 STALE_UPLOAD_S = 600.0
+# A file of exactly max_upload_mb comes wrapped in multipart boundaries and the form's other fields.
+UPLOAD_ENVELOPE_BYTES = 1 << 20
+# waitress buffers a whole body before the app sees it; bodies up to this much over the app's limit
+# still reach the app, for its own 413 answer (see webapp.cli.workspace.waitress_options).
+SERVER_SLACK_BYTES = 16 << 20
 STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
 
 
@@ -43,11 +50,12 @@ def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
     app = Flask(__name__, static_folder=str(STATIC_DIR), static_url_path="/static")
     app.config.update(
         SECRET_KEY=settings.secret_key or _stored_secret(settings.home),
-        MAX_CONTENT_LENGTH=settings.max_upload_mb * 1024 * 1024,
+        MAX_CONTENT_LENGTH=request_body_limit(settings),
         SESSION_COOKIE_HTTPONLY=True,
         SESSION_COOKIE_SAMESITE="Lax",
         SESSION_COOKIE_SECURE=settings.https,
     )
+    app.json = FiniteJSONProvider(app)
     app.json.sort_keys = False  # type: ignore[attr-defined]
     # Before any route is added: ids beyond what the database stores are a 404, not a crash.
     app.url_map.converters["int"] = DatabaseInt
@@ -58,6 +66,14 @@ def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
     def _open_session() -> None:
         g.db = rt.sessions()
 
+    @app.before_request
+    def _refuse_null_bytes() -> None:
+        # A NUL reaching the file system is a ValueError ("embedded null byte") in any route that
+        # opens a file by a name from the URL: refuse it here, once, for every route.
+        if "\x00" in request.path or any("\x00" in key or any("\x00" in v for v in values)
+                                         for key, values in request.args.lists()):
+            abort(400, "the URL contains a null byte (%00): no path or name holds one")
+
     @app.teardown_request
     def _close_session(_exc: BaseException | None) -> None:
         db = g.pop("db", None)
@@ -66,6 +82,7 @@ def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
 
     init_throttle(app, settings)
     init_headers(app, settings)
+    init_redaction(app, settings)
     init_auth(app)
 
     from webapp.api import api
@@ -76,6 +93,11 @@ def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
     app.register_blueprint(api, url_prefix="/api/v1")
     _register_errors(app)
     return app
+
+
+def request_body_limit(settings: Settings) -> int:
+    """The largest request body the app reads, in bytes: one upload of ``max_upload_mb`` MiB and its envelope."""
+    return settings.max_upload_mb * 1024 * 1024 + UPLOAD_ENVELOPE_BYTES
 
 
 def _stored_secret(home: Path) -> str:
@@ -94,6 +116,9 @@ def _register_errors(app: Flask) -> None:
 
     @app.errorhandler(ServiceError)
     def _service_error(exc: ServiceError) -> Any:
+        field = getattr(exc, "field", None)  # a launch's wrong field, which the forms mark
+        if field and is_api_request():
+            return jsonify(error=str(exc), status=exc.status, field=field, reason=exc.reason), exc.status
         return render(exc.status, str(exc))
 
     @app.errorhandler(CSRFError)

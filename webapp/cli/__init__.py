@@ -6,8 +6,10 @@ from pathlib import Path
 
 import click
 
+from dataset.settings import HOME_ENV
 from webapp.cli.bench import bench
 from webapp.cli.capture import import_capture, import_reconstruction
+from webapp.cli.demo import demo
 from webapp.cli.evaluate import evaluate_cmd
 from webapp.cli.export import export_cmd, import_cmd
 from webapp.cli.geometry import geometry
@@ -17,9 +19,9 @@ from webapp.cli.media import media
 from webapp.cli.model import predict
 from webapp.cli.selftest import selftest
 from webapp.cli.state import CliState
-from webapp.cli.train import runs, train
+from webapp.cli.train import checkpoints, runs, train
 from webapp.cli.users import users
-from webapp.cli.workspace import demo, init, serve, synth
+from webapp.cli.workspace import init, serve, synth
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -27,7 +29,9 @@ from webapp.cli.workspace import demo, init, serve, synth
     "--data-dir",
     type=click.Path(file_okay=False, path_type=Path),
     default=None,
-    help="Workspace directory (default: $ILLUSION_STUDIO_HOME).",
+    # The same for every command: an unset --data-dir is $ILLUSION_STUDIO_HOME, here, once.
+    envvar=HOME_ENV,
+    help=f"Workspace directory (default: ${HOME_ENV}).",
 )
 @click.pass_context
 def main(ctx: click.Context, data_dir: Path | None) -> None:
@@ -36,6 +40,6 @@ def main(ctx: click.Context, data_dir: Path | None) -> None:
 
 
 for command in (init, serve, worker, demo, synth, ingest, prefilter, frames, users, jobs, geometry, bench, selftest,
-                import_capture, import_reconstruction, export_cmd, import_cmd, train, runs, predict,
+                import_capture, import_reconstruction, export_cmd, import_cmd, train, runs, checkpoints, predict,
                 evaluate_cmd, media):
     main.add_command(command)

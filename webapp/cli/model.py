@@ -15,6 +15,9 @@ from webapp.cli.state import CliState, pass_state
 OUTPUTS = ("confidence", "stereo", "mono_align")
 _NO_MODEL = ("no --checkpoint given and this workspace has no current model "
              "(promote a run on the Models page or pass --checkpoint)")
+_NO_MONO = ("this model takes the left view's monocular disparity and none is at hand: pass --mono FILE "
+            "(.pfm, .npy or the authors' .png), or give the workspace a depth model directory, "
+            "depth_backend = \"depth-anything-v2\" and depth_model_path = \"DIR\" in its illusion-studio.toml")
 
 
 @click.command("predict")
@@ -25,7 +28,8 @@ _NO_MODEL = ("no --checkpoint given and this workspace has no current model "
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="Disparity output (float32 PFM, pixels, left view).")
 @click.option("--mono", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
-              help="Relative mono disparity (.pfm, .npy or the authors' .png); any size.")
+              help="Relative mono disparity (.pfm, .npy or the authors' .png); any size. Default: the "
+                   "workspace's depth backend estimates it (depth_backend, depth_model_path).")
 @click.option("--preview", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also write a colour-mapped PNG with a colour bar.")
 @click.option("--outputs", default="", help=f"Comma-separated extra maps: {', '.join(OUTPUTS)} (hyphens ok).")
@@ -58,9 +62,16 @@ def predict(state: CliState, left: Path, right: Path, checkpoint: Path | None, o
 
     try:
         network, config, _ = load_network(checkpoint, device)
+        if mono_map is None and config.model.mono_backend == "precomputed":
+            mono_map = _estimate_mono(state, left_rgb, device)
         result = Predictor(network, config, device).predict(left_rgb, right_rgb, mono_map, iters=iters, seed=seed)
     except ValueError as exc:
         raise click.ClickException(str(exc).splitlines()[0]) from None
+    for name in ("disparity", *extras):
+        bad = int((~np.isfinite(getattr(result, name))).sum())
+        if bad:
+            raise click.ClickException(f"the model's {name.replace('_', '-')} is not finite at {bad} of "
+                                       f"{result.disparity.size} pixels (a diverged checkpoint?); nothing written")
     out.parent.mkdir(parents=True, exist_ok=True)
     write_pfm(out, result.disparity)
     for name in extras:
@@ -69,6 +80,17 @@ def predict(state: CliState, left: Path, right: Path, checkpoint: Path | None, o
         write_rgb(preview, _preview(result.disparity))
     click.echo(f"wrote {out} ({result.disparity.shape[1]}×{result.disparity.shape[0]}, "
                f"disparity {np.nanmin(result.disparity):.2f}–{np.nanmax(result.disparity):.2f} px)")
+
+
+def _estimate_mono(state: CliState, left: np.ndarray, device: str) -> np.ndarray:
+    """The left view's relative disparity (float32 H×W) from the workspace's depth backend; a
+    ClickException naming both ways to give one when there is no workspace or no depth model."""
+    if state.data_dir is None or state.settings.depth_backend == "precomputed":
+        raise click.ClickException(_NO_MONO)
+    from annotation.depth import make_depth_backend
+
+    settings = state.settings
+    return make_depth_backend(settings.depth_backend, model_path=settings.depth_model_path, device=device).estimate(left)
 
 
 def _preview(disparity: np.ndarray) -> np.ndarray:
