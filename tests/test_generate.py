@@ -26,6 +26,10 @@ W, H = 320, 180
 def prepare(runtime: Runtime, tmp_path: Path, n_frames: int = 2, annotate: bool = True) -> Path:
     """Synthetic frames ingested, approved and (optionally) annotated from their true masks."""
     [scene] = write_synthetic_dataset(tmp_path / "s", videos=1, seed=8, n_frames=n_frames, width=W, height=H)
+    # The exact mono-fooled disparity (the truth outside illusions), so the figures below measure the
+    # pipeline; the realistic one is the synthetic data's own (tests/test_synthetic_mono.py).
+    for folder in (scene / "frames").iterdir():
+        (folder / "mono_disparity.npy").write_bytes((folder / "mono_ideal.npy").read_bytes())
     with transaction(runtime.sessions) as s:
         runtime.submit(s, "ingest", ingest_params(str(scene), fps=None, dedup_hamming=None), None)
     job_service.run_queued_jobs(HANDLERS, runtime)

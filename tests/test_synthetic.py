@@ -85,7 +85,7 @@ def test_frame_contract(video: SyntheticVideo) -> None:
         assert frame.time_s == pytest.approx(frame.index / video.fps)
         for image in (frame.left, frame.right):
             assert image.shape == (360, 640, 3) and image.dtype == np.uint8
-        for d in (frame.disparity, frame.mono_disparity, frame.stereo_disparity):
+        for d in (frame.disparity, frame.mono_disparity, frame.mono_ideal, frame.stereo_disparity):
             assert d.shape == (360, 640) and d.dtype == np.float32
             assert np.isfinite(d).all() and (d > 0).all()
         # Realistic magnitudes: a room of a few metres with f = 500 px and B = 0.1 m.
@@ -99,7 +99,7 @@ def test_same_seed_same_video_other_seed_other_scene() -> None:
     b = render_video(5, n_frames=2, width=160, height=90)
     c = render_video(6, n_frames=2, width=160, height=90)
     for fa, fb in zip(a.frames, b.frames):
-        for name in ("left", "right", "disparity", "mono_disparity", "stereo_disparity"):
+        for name in ("left", "right", "disparity", "mono_disparity", "mono_ideal", "stereo_disparity"):
             assert np.array_equal(getattr(fa, name), getattr(fb, name))
         for ra, rb in zip(fa.regions, fb.regions):
             assert np.array_equal(ra.illusion, rb.illusion)
@@ -137,7 +137,7 @@ def test_mono_fooled_by_picture_and_mirror(video: SyntheticVideo,
                                            side_wall_video: SyntheticVideo) -> None:
     for frame in _frames(video, side_wall_video):
         picture, mirror = frame.regions[0].illusion, frame.regions[1].illusion
-        truth, mono = frame.disparity, frame.mono_disparity
+        truth, mono = frame.disparity, frame.mono_ideal
         scale = 640 / frame.disparity.shape[1]
         # The depicted room lies behind the wall: deeper, so smaller disparity everywhere.
         assert (mono[picture] < truth[picture]).all()
@@ -233,7 +233,7 @@ def test_write_read_round_trip(tmp_path: Path) -> None:
     assert len(loaded.frames) == len(original.frames)
     for a, b in zip(original.frames, loaded.frames):
         assert (a.index, a.time_s) == (b.index, b.time_s)
-        for name in ("left", "right", "disparity", "mono_disparity", "stereo_disparity"):
+        for name in ("left", "right", "disparity", "mono_disparity", "mono_ideal", "stereo_disparity"):
             x, y = getattr(a, name), getattr(b, name)
             assert x.dtype == y.dtype and np.array_equal(x, y)
         assert len(a.regions) == len(b.regions)
@@ -273,6 +273,6 @@ def test_dataset_is_byte_identical_across_runs(tmp_path: Path) -> None:
 def test_the_baseline_scales_every_disparity() -> None:
     near = render_video(3, n_frames=1, width=64, height=36)
     far = render_video(3, n_frames=1, width=64, height=36, baseline_m=0.05)
-    for name in ("disparity", "mono_disparity", "stereo_disparity"):
+    for name in ("disparity", "mono_disparity", "mono_ideal", "stereo_disparity"):
         np.testing.assert_allclose(getattr(far.frames[0], name), 0.5 * getattr(near.frames[0], name), rtol=1e-5)
     assert far.baseline_m == 0.05

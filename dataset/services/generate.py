@@ -20,6 +20,7 @@ from sqlalchemy import select
 
 from annotation.inpaint import InpainterError
 from dataset.db import transaction
+from dataset.finite import finite_json
 from dataset.formats import rle_to_mask
 from dataset.geometry import (
     GeometryError,
@@ -91,8 +92,9 @@ def mono_disparity(settings: Settings, media: MediaStore, frame: Frame, video: V
     if "mono_disparity" in assets and video.meta.get("synthetic"):
         disparity = np.load(io.BytesIO(media.read_bytes(assets["mono_disparity"])))
         return MonoDisparity(disparity.astype(np.float32),
-                             {"depth_backend": "synthetic", "simulated": True, "units": "px",
-                              "note": "recorded mono-fooled disparity of a synthetic scene, not a model's estimate"})
+                             {"depth_backend": "synthetic", "simulated": True, "units": "relative",
+                              "note": "a synthetic scene's simulated monocular estimate (relative, coarse, fooled "
+                                      "by pictures and partly by mirrors), not a model's"})
     raise GenerationError(f"frame {frame.id} has no monocular disparity: set depth_backend = 'depth-anything-v2' "
                           "with depth_model_path, or import precomputed disparities with the frames")
 
@@ -142,7 +144,7 @@ def generate_job(ctx: JobContext) -> dict[str, Any]:
         # disparity alone; a low figure means the imported disparity and rendering disagree.
         rendered = load_output(media, frame.assets["reconstruction_right"], "right")
         untouched = ~view.holes & ~np.any([p.illusion for _, p in pairs], axis=0)
-        qa["reconstruction_right_psnr_db"] = _finite(psnr(view.image, rendered, untouched))
+        qa["reconstruction_right_psnr_db"] = finite_json(psnr(view.image, rendered, untouched))
     outputs: dict[str, Any] = {
         "left": left, "right": view.image, "disparity": disparity, "disparity_rect": rect.disparity,
         "disparity_mono": mono.disparity, "holes": view.holes,
@@ -150,7 +152,7 @@ def generate_job(ctx: JobContext) -> dict[str, Any]:
                   for kind, mask in (("illusion", p.illusion), ("support", p.support)) if mask is not None},
     }
     files = store_outputs(media, outputs)
-    params = _finite({"scale": view.scale, "tau": settings.right_view_tau, "valid_ratio": view.valid_ratio,
+    params = finite_json({"scale": view.scale, "tau": settings.right_view_tau, "valid_ratio": view.valid_ratio,
               "plane_threshold": settings.plane_threshold, "plane_hypotheses": settings.plane_hypotheses,
               "inpaint": settings.inpaint_backend, "seed": frame.id})
     provenance = {**mono.provenance, "source": "reconstruction" if mono.provenance["depth_backend"] == "reconstruction"
@@ -206,16 +208,5 @@ def _qa(settings: Settings, reports: list[Any], view: Any, check: Any, pair_ids:
             flags.append(f"pair {number} {p['status']}: {p['reason']}")
         elif p["inlier_ratio"] is not None and p["inlier_ratio"] < settings.qa_min_inlier_ratio:
             flags.append(f"pair {number} inlier ratio {p['inlier_ratio']:.2f} < {settings.qa_min_inlier_ratio:g}")
-    return _finite({"pairs": pairs, "scale": view.scale, "hole_fraction": hole_fraction, "stereo_epe": check.epe,
-                    "stereo_bad2": check.bad2, "stereo_coverage": check.coverage, "flags": flags})
-
-
-def _finite(value: Any) -> Any:
-    """NaN and inf become None: JSON has no NaN, and PostgreSQL refuses it."""
-    if isinstance(value, float):
-        return value if np.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_finite(v) for v in value]
-    return value
+    return finite_json({"pairs": pairs, "scale": view.scale, "hole_fraction": hole_fraction, "stereo_epe": check.epe,
+                        "stereo_bad2": check.bad2, "stereo_coverage": check.coverage, "flags": flags})

@@ -2,7 +2,7 @@
 
 ``<out_dir>/<video.name>/``: ``video.mp4`` (left frames, mp4v), ``scene.json`` and
 ``frames/{index:06d}/`` holding ``left.png``, ``right.png``, ``disparity.npy``,
-``mono_disparity.npy``, ``stereo_disparity.npy`` and ``illusion_{pair:02d}.png`` /
+``mono_disparity.npy``, ``mono_ideal.npy``, ``stereo_disparity.npy`` and ``illusion_{pair:02d}.png`` /
 ``support_{pair:02d}.png``. Every file is written atomically (temp file + ``os.replace``);
 ``scene.json`` is written last, so a reader that finds it also finds every frame it lists.
 Same video in → byte-identical files out.
@@ -21,11 +21,12 @@ import numpy as np
 
 from dataset.atomic import atomic_write_bytes
 from dataset.synthetic.defects import DEFECT_FRAMES, spoil_last_frames
+from dataset.synthetic.mono import FrameAffine, MonoModel
 from dataset.synthetic.records import RegionPair, SyntheticFrame, SyntheticVideo
 from dataset.synthetic.render import render_video
 
-FORMAT = "illusion-studio/synthetic-v1"
-_MAPS = ("disparity", "mono_disparity", "stereo_disparity")
+FORMAT = "illusion-studio/synthetic-v2"  # v2: the realistic mono_disparity, mono_ideal beside it
+_MAPS = ("disparity", "mono_disparity", "mono_ideal", "stereo_disparity")
 _FILES = {
     "video.mp4": "left frames at fps, MPEG-4 Part 2 ('mp4v'), lossy; for ingest",
     "frames/{index:06d}/left.png": "left image, 8-bit RGB, lossless",
@@ -33,9 +34,15 @@ _FILES = {
                                     "right camera = left camera + baseline along its +x",
     "frames/{index:06d}/disparity.npy": "true disparity f*B/Z, float32 (H, W), px, left view; "
                                         "a mirror counts as its flat glass",
-    "frames/{index:06d}/mono_disparity.npy": "mono-fooled disparity, float32 (H, W): the depicted "
-                                             "scene inside pictures, the reflected (virtual) scene "
-                                             "inside mirrors, the truth elsewhere",
+    "frames/{index:06d}/mono_disparity.npy": "a realistic monocular network's disparity, float32 "
+                                             "(H, W) > 0, relative (frame's mono_scale, mono_shift): "
+                                             "the depicted scene inside pictures, a fraction "
+                                             "mono.mirror_fraction of the way from the glass to the "
+                                             "reflected scene inside mirrors, elsewhere the truth "
+                                             "distorted in log-depth and blurred (scene.json's mono)",
+    "frames/{index:06d}/mono_ideal.npy": "exact mono-fooled disparity, float32 (H, W), px: the "
+                                         "depicted scene inside pictures, the reflected (virtual) "
+                                         "scene inside mirrors, the truth elsewhere",
     "frames/{index:06d}/stereo_disparity.npy": "stereo-fooled disparity, float32 (H, W): the "
                                                "reflected (virtual) scene inside mirrors, the "
                                                "truth elsewhere",
@@ -109,8 +116,10 @@ def write_video(video: SyntheticVideo, out_dir: Path, defects: dict[int, str] | 
                        "view, a left pixel (u, v) matching right pixel (u - d, v)",
         "pairs": [{"pair": r.pair, "kind": r.kind, "illusion_type": r.illusion_type}
                   for r in video.frames[0].regions],
-        "frames": [{"index": f.index, "time_s": f.time_s, **({"defect": defects[f.index]} if f.index in (defects or {})
-                                                              else {})} for f in video.frames],
+        "mono": video.mono.as_dict(),
+        "frames": [{"index": f.index, "time_s": f.time_s, "mono_scale": f.mono_affine.scale,
+                    "mono_shift": f.mono_affine.shift,
+                    **({"defect": defects[f.index]} if f.index in (defects or {}) else {})} for f in video.frames],
         "files": _FILES,
     }
     atomic_write_bytes(root / "scene.json", (json.dumps(scene, indent=2) + "\n").encode())
@@ -143,11 +152,12 @@ def read_video(video_dir: Path) -> SyntheticVideo:
                      for name in ("illusion", "support")}
             regions.append(RegionPair(pair["pair"], pair["kind"], pair["illusion_type"], **masks))
         frames.append(SyntheticFrame(index=entry["index"], time_s=entry["time_s"], **images,
-                                     **maps, regions=regions))
+                                     **maps, regions=regions,
+                                     mono_affine=FrameAffine(entry["mono_scale"], entry["mono_shift"])))
     k = scene["intrinsics"]
     return SyntheticVideo(name=scene["name"], seed=scene["seed"], fps=scene["fps"], fx=k["fx"],
                           fy=k["fy"], cx=k["cx"], cy=k["cy"], baseline_m=scene["baseline_m"],
-                          frames=frames)
+                          frames=frames, mono=MonoModel.from_dict(scene["mono"]))
 
 
 def write_synthetic_dataset(out_dir: Path, videos: int = 3, seed: int = 0, n_frames: int = 12,

@@ -11,6 +11,8 @@ from typing import Literal
 
 import numpy as np
 
+from dataset.synthetic.mono import FrameAffine, MonoModel
+
 IllusionKind = Literal["picture", "mirror"]
 
 
@@ -38,7 +40,9 @@ class SyntheticFrame:
     ``left``/``right``: uint8 (H, W, 3) RGB, the right camera translated by the baseline
     along the left camera's +x; ``disparity``: float32 true disparity f·B/Z (Z = camera depth
     of the first surface met, the mirror counting as its glass), finite and > 0;
-    ``mono_disparity``: float32, what a texture-driven monocular estimator reports (the
+    ``mono_disparity``: float32 > 0, what a real monocular network reports (relative, coarse,
+    fooled by pictures and partly by mirrors; see dataset.synthetic.mono), ``mono_affine`` its
+    frame's scale and shift; ``mono_ideal``: float32, an exact mono-fooled disparity (the
     depicted scene inside a picture, the reflected scene inside a mirror, else the truth);
     ``stereo_disparity``: float32, what a stereo matcher reports (the reflected scene's
     virtual depth inside a mirror, else the truth); ``time_s`` = index / fps.
@@ -52,12 +56,15 @@ class SyntheticFrame:
     mono_disparity: np.ndarray
     stereo_disparity: np.ndarray
     regions: list[RegionPair]
+    mono_ideal: np.ndarray
+    mono_affine: FrameAffine
 
 
 @dataclass(frozen=True, eq=False)
 class SyntheticVideo:
     """A rendered synthetic video: pinhole intrinsics ``fx``, ``fy``, ``cx``, ``cy`` (pixels,
-    pixel centres at integer coordinates), stereo ``baseline_m`` (m), frame rate ``fps``."""
+    pixel centres at integer coordinates), stereo ``baseline_m`` (m), frame rate ``fps``, and the
+    monocular estimator ``mono`` its frames' ``mono_disparity`` came from."""
 
     name: str
     seed: int
@@ -68,6 +75,7 @@ class SyntheticVideo:
     cy: float
     baseline_m: float
     frames: list[SyntheticFrame]
+    mono: MonoModel
 
     @property
     def width(self) -> int:

@@ -1,16 +1,17 @@
-"""Render synthetic illusion videos: exact stereo pairs and true / mono-fooled /
-stereo-fooled disparities with picture and mirror masks.
+"""Render synthetic illusion videos: exact stereo pairs and true / mono-fooled (ideal and
+realistic) / stereo-fooled disparities with picture and mirror masks.
 
 Images are supersampled (SUPERSAMPLE² rays per pixel, averaged) so that forward-warping the
 left view with the true disparity reproduces the right view closely; the maps come from
 one float64 ray through each pixel centre, so a plane's disparity is exactly a plane in
 (u, v, d).
 
-Mono-fooled disparity: inside the picture it is the depicted scene's depth (the room behind
-the canvas, seen from the viewpoint the picture was painted for) measured along the current
-camera's optical axis; inside the mirror it is the reflected room's virtual depth, because a
-monocular network reads a mirror as an opening just as it reads a picture. A picture seen
-*in* the mirror counts as part of the reflected room (its flat virtual surface).
+Ideal mono-fooled disparity (``mono_ideal``): inside the picture it is the depicted scene's
+depth (the room behind the canvas, seen from the viewpoint the picture was painted for) measured
+along the current camera's optical axis; inside the mirror it is the reflected room's virtual
+depth, because a monocular network reads a mirror as an opening just as it reads a picture. A
+picture seen *in* the mirror counts as part of the reflected room (its flat virtual surface).
+Elsewhere it is the truth. The realistic one (``mono_disparity``) is made from it by :mod:`dataset.synthetic.mono`.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from dataset.synthetic.layout import (
     face_point,
     sample_layout,
 )
+from dataset.synthetic.mono import realistic_mono, sample_mono_model
 from dataset.synthetic.raycast import TANGENT_AXES, View, cast, shade, trace
 from dataset.synthetic.records import RegionPair, SyntheticFrame, SyntheticVideo
 from dataset.synthetic.textures import Atlas, build_atlas
@@ -87,7 +89,7 @@ def _render_image(layout: Layout, atlas: Atlas, view: View, width: int, height: 
 
 def _render_maps(layout: Layout, view: View, width: int, height: int,
                  baseline_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[RegionPair]]:
-    """(true, mono-fooled, stereo-fooled) float32 (H, W) disparities and the region pairs."""
+    """(true, ideal mono-fooled, stereo-fooled) float32 (H, W) disparities and the region pairs."""
     u, v = np.arange(width, dtype=np.float64), np.arange(height, dtype=np.float64)
     primary, final = trace(layout.scene, view, u, v)
     fb = view.f * baseline_m
@@ -136,6 +138,7 @@ def render_video(seed: int, n_frames: int = 12, width: int = 640,
         raise ValueError(f"need n_frames >= 1 and a size of at least 16x16, got "
                          f"{n_frames} frames of {width}x{height}")
     layout = sample_layout(seed)
+    mono_model = sample_mono_model(seed)
     atlas = build_atlas((render_picture(layout),))
     f, cx, cy = intrinsics(width, height)
     frames = []
@@ -144,7 +147,10 @@ def render_video(seed: int, n_frames: int = 12, width: int = 640,
         center, rotation = layout.trajectory.pose(time_s)
         left = View(center, rotation, f, cx, cy)
         right = View(center + baseline_m * rotation[:, 0], rotation, f, cx, cy)
-        disparity, mono, stereo, regions = _render_maps(layout, left, width, height, baseline_m)
+        disparity, ideal, stereo, regions = _render_maps(layout, left, width, height, baseline_m)
+        illusions = {r.kind: r.illusion for r in regions}
+        mono, affine = realistic_mono(mono_model, seed, index, disparity, ideal, illusions["picture"],
+                                      illusions["mirror"])
         frames.append(SyntheticFrame(
             index=index,
             time_s=time_s,
@@ -152,8 +158,10 @@ def render_video(seed: int, n_frames: int = 12, width: int = 640,
             right=_render_image(layout, atlas, right, width, height),
             disparity=disparity,
             mono_disparity=mono,
+            mono_ideal=ideal,
+            mono_affine=affine,
             stereo_disparity=stereo,
             regions=regions,
         ))
     return SyntheticVideo(name=f"synthetic-{seed:04d}", seed=seed, fps=FPS, fx=f, fy=f, cx=cx,
-                          cy=cy, baseline_m=baseline_m, frames=frames)
+                          cy=cy, baseline_m=baseline_m, frames=frames, mono=mono_model)

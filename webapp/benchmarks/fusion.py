@@ -6,8 +6,10 @@ other seeds imported as captures, whose raytraced right views show stereo fooled
 generated samples never do: their right views are warped from the rectified disparity). A short
 ``lite`` run trains on them through the real training job. The test set is rendered pairs of yet
 other seeds, never seen in training or validation, rendered with a baseline that brings their
-disparities into the training range, with their mono-fooled disparity as the monocular input.
-Every method is scored densely over the same valid pixels.
+disparities into the training range, with their realistic monocular disparity (relative, coarse,
+fooled by pictures and partly by mirrors: ``dataset.synthetic.mono``) as the monocular input.
+Every method is scored densely over the same valid pixels. ``run_mono_bench`` scores mono-gt-align
+alone, without training: the figure the monocular model was calibrated on.
 
 Preparing the data is cached in the work folder and timed apart from training.
 """
@@ -37,6 +39,7 @@ from dataset.services.ingest import ingest_params
 from dataset.services.review import review_frame
 from dataset.services.sample_review import review_sample
 from dataset.synthetic import render_video, write_synthetic_dataset
+from dataset.synthetic.io import FORMAT as SYNTHETIC_FORMAT
 from dataset.synthetic.layout import BASELINE_M
 from model.evaluate import EvalOptions, evaluate
 from model.methods import build_methods
@@ -86,7 +89,8 @@ def prepared_workspace(home: Path) -> tuple[Runtime, bool]:
     """The benchmark's workspace: every synthetic frame generated and accepted, and the rendered
     captures imported and accepted. Built once; a later call finds ``prepared.json`` and reuses it."""
     marker = home / "prepared.json"
-    recipe = {"size": SIZE, "frames": FRAMES, "generated": GENERATED_VIDEOS, "rendered": RENDERED_SEEDS}
+    recipe = {"size": SIZE, "frames": FRAMES, "generated": GENERATED_VIDEOS, "rendered": RENDERED_SEEDS,
+              "synthetic": SYNTHETIC_FORMAT}
     cached = marker.is_file() and json.loads(marker.read_text()) == json.loads(json.dumps(recipe))
     settings = init_workspace(home)
     rt = Runtime(settings)
@@ -140,14 +144,16 @@ def _range(values: np.ndarray) -> list[float]:
     return [round(float(np.percentile(values, 1)), 2), round(float(np.percentile(values, 99)), 2)]
 
 
-def test_samples(train_range: list[float]) -> tuple[list[StereoSample], float]:
-    """The held-out rendered pairs, at a baseline putting their 99th percentile disparity at the
-    training one's; regions all / picture / mirror / non_illusion; mono = the mono-fooled disparity."""
-    probe = render_video(TEST_SEEDS[0], 1, *SIZE)
+def test_samples(train_range: list[float], seeds: tuple[int, ...] = TEST_SEEDS,
+                 frames: int = FRAMES) -> tuple[list[StereoSample], float]:
+    """The held-out rendered pairs (``frames`` of each seed, at SIZE), at a baseline putting their
+    first seed's 99th percentile disparity at the training one's; regions all / picture / mirror /
+    non_illusion; mono = the realistic monocular disparity."""
+    probe = render_video(seeds[0], 1, *SIZE)
     baseline = BASELINE_M * train_range[1] / float(np.percentile(probe.frames[0].disparity, 99))
     samples = []
-    for seed in TEST_SEEDS:
-        video = render_video(seed, FRAMES, *SIZE, baseline_m=baseline)
+    for seed in seeds:
+        video = render_video(seed, frames, *SIZE, baseline_m=baseline)
         for frame in video.frames:
             masks = {pair.illusion_type: pair.illusion for pair in frame.regions}
             illusion = np.logical_or.reduce(list(masks.values()))
@@ -156,6 +162,32 @@ def test_samples(train_range: list[float]) -> tuple[list[StereoSample], float]:
                 disparity=frame.disparity, regions=make_regions(frame.disparity, {**masks, "non_illusion": ~illusion}),
                 mono=frame.mono_disparity, meta={"seed": seed}))
     return samples, baseline
+
+
+def run_mono_bench(work_dir: Path) -> dict[str, Any]:
+    """mono-gt-align on the held-out test pairs, no training: EPE and bad-2 per region, the
+    non-illusion bad-2 (the monocular model's calibration figure) on top. Prepares (or reuses) the
+    workspace in ``work_dir`` for the training disparity range that fixes the test baseline."""
+    started = time.perf_counter()
+    rt, cached = prepared_workspace(work_dir / "workspace")
+    train_range = training_disparity_range(rt)
+    rt.close()
+    test, baseline = test_samples(train_range)
+    figures = mono_figures(test)
+    return {"non_illusion_bad2": figures["non_illusion"]["bad2"], "methods": {"mono_gt_align": figures},
+            "size": f"{SIZE[0]}x{SIZE[1]}", "test_samples": len(test), "test_seeds": list(TEST_SEEDS),
+            "train_disparity_px": train_range, "test_baseline_m": round(baseline, 4),
+            "prepare_cached": cached, "seconds": round(time.perf_counter() - started, 1)}
+
+
+def mono_figures(samples: list[StereoSample]) -> dict[str, dict[str, float]]:
+    """mono-gt-align's EPE (px) and bad-2 (%) per region of REGIONS, mean over ``samples``."""
+    report = evaluate(samples, build_methods(["mono_gt_align"], checkpoint=None, predictions=None, mono_dir=None),
+                      EvalOptions(regions=REGIONS))
+    if report["failed"]:
+        raise RuntimeError(f"mono-gt-align failed on {report['failed'][:3]}")
+    regions = report["methods"]["mono_gt_align"]["regions"]
+    return {r: {k: round(regions[r][k], 3) for k in ("epe", "bad2")} for r in REGIONS}
 
 
 def _train_and_score(rt: Runtime, seed: int, steps: int, test: list[StereoSample]) -> dict[str, Any]:

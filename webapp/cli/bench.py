@@ -160,11 +160,16 @@ def model_benchmark(as_json: bool, repeats: int, train_steps: int) -> None:
 @click.option("--steps", type=click.IntRange(min=1), default=None, help="Training steps per run (default: the benchmark's).")
 @click.option("--work-dir", type=click.Path(file_okay=False, path_type=Path), default=Path("var/bench-fusion"),
               show_default=True, help="Where the prepared data is cached between runs.")
-def fusion_benchmark(as_json: bool, seeds: int, steps: int | None, work_dir: Path) -> None:
+@click.option("--mono-only", is_flag=True,
+              help="No training: score mono-gt-align alone on the test pairs (the monocular input's calibration).")
+def fusion_benchmark(as_json: bool, seeds: int, steps: int | None, work_dir: Path, mono_only: bool) -> None:
     """The synthetic illusion benchmark: train lite on the product's own samples and rendered captures,
     score fusion, stereo, mono-gt-align and sgbm on held-out rendered pairs (all, picture, mirror, non-illusion)."""
-    from webapp.benchmarks.fusion import DEFAULT_STEPS, run_fusion_bench
+    from webapp.benchmarks.fusion import DEFAULT_STEPS, run_fusion_bench, run_mono_bench
 
+    if mono_only:
+        _report(run_mono_bench(work_dir.absolute()), as_json)
+        return
     _report(run_fusion_bench(work_dir.absolute(), seeds=seeds, steps=steps or DEFAULT_STEPS), as_json)
 
 
