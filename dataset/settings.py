@@ -21,7 +21,8 @@ from pydantic_settings import BaseSettings, EnvSettingsSource, PydanticBaseSetti
 ENV_PREFIX = "ILLUSION_STUDIO_"
 HOME_ENV = ENV_PREFIX + "HOME"
 SETTINGS_FILE = "illusion-studio.toml"
-_ROOT_NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")
+DATASET_ROOT_NAME = r"[A-Za-z0-9_.-]{1,64}"  # what a registered dataset root may be called
+_ROOT_NAME = re.compile(DATASET_ROOT_NAME)
 
 
 class SettingsError(ValueError):

@@ -56,11 +56,11 @@ def evaluation_params(request: EvaluationLaunch, settings: Any, session: Session
     the checkpoint's run) — samples its training never read.
     """
     shell = shell or EvalShellOptions()
-    checkpoint = _checkpoint_param(request, settings, session, shell)
+    source = _checkpoint_source(request, settings, session, shell)
     data = _folder_param(request.data, shell.data_dir, settings, "data")
     run = request.run
     if data is None:
-        run = run or (checkpoint or {}).get("run")
+        run = run or source.get("run")
         if run is None:
             raise FieldError("run", "choose a run whose held-out test split to evaluate on, or a dataset folder")
         _test_split(settings, session, run)
@@ -68,22 +68,33 @@ def evaluation_params(request: EvaluationLaunch, settings: Any, session: Session
         raise FieldError("predictions", "the predictions method needs a predictions folder")
     resolution = request.resolution or ("quarter" if (request.data and request.data.format == "booster")
                                         or shell.data_format == "booster" else "full")
-    return {"data": data, "format": (request.data.format if request.data else shell.data_format) if data else "database",
-            "methods": list(request.methods), "out": str(shell.out.resolve()) if shell.out else None,
-            "checkpoint": checkpoint, "run": run,
-            "predictions": _folder_param(request.predictions, shell.predictions, settings, "predictions"),
-            "mono": _folder_param(request.mono, shell.mono, settings, "mono"), "resolution": resolution,
-            "align": request.align, "max_disparity": request.max_disparity, "kitti_png": request.kitti_png,
-            "iters": request.iters, "thresholds": [float(t) for t in shell.thresholds],
-            "reader_options": dict(shell.reader_options)}
+    params = {"data": data, "format": (request.data.format if request.data else shell.data_format) if data else "database",
+              "methods": list(request.methods), "out": str(shell.out.resolve()) if shell.out else None, "run": run,
+              "predictions": _folder_param(request.predictions, shell.predictions, settings, "predictions"),
+              "mono": _folder_param(request.mono, shell.mono, settings, "mono"), "resolution": resolution,
+              "align": request.align, "max_disparity": request.max_disparity, "kitti_png": request.kitti_png,
+              "iters": request.iters, "thresholds": [float(t) for t in shell.thresholds],
+              "reader_options": dict(shell.reader_options)}
+    # Pinned last, once nothing else can refuse the launch: a refused one leaves no pin behind.
+    found = source.get("file")
+    if isinstance(found, registry.CheckpointFile):
+        try:
+            pinned = registry.pin(found)
+        except ValueError as exc:
+            raise FieldError("checkpoint", str(exc)) from None
+        source = {"run": pinned.run, "file": pinned.name, "step": pinned.step}
+    return {**params, "checkpoint": source or None}
 
 
-def _checkpoint_param(request: EvaluationLaunch, settings: Any, session: Session,
-                      shell: EvalShellOptions) -> dict[str, Any] | None:
+def _checkpoint_source(request: EvaluationLaunch, settings: Any, session: Session,
+                       shell: EvalShellOptions) -> dict[str, Any]:
+    """Which checkpoint the network methods use, not yet pinned: ``{"run", "file": CheckpointFile}``
+    for a run's, ``{"path"}`` (and its ``run`` when it lies in one) for the command line's or an
+    outside current model; ``{}`` when no method needs one."""
     if not request.needs_network:
-        return None
+        return {}
     if shell.checkpoint is not None:
-        return {"path": str(shell.checkpoint.resolve())}
+        return _outside(shell.checkpoint, settings)
     if request.checkpoint is not None:
         run_id, which = request.checkpoint.run, request.checkpoint.checkpoint
     else:
@@ -93,15 +104,25 @@ def _checkpoint_param(request: EvaluationLaunch, settings: Any, session: Session
             if outside is None:
                 raise FieldError("checkpoint", "fusion, stereo and mono-align need a checkpoint: name a run's, "
                                                "or promote a run to the current model")
-            return {"path": str(outside)}
+            return _outside(outside, settings)
         run_id, which = current
     try:
         run = training.get_run(session, run_id)
         found = registry.run_checkpoint(settings.runs_dir, run.id, which, best_step=run.best_step)
     except NotFound as exc:
         raise FieldError("checkpoint", str(exc)) from None
-    pinned = registry.pin(found)
-    return {"run": pinned.run, "file": pinned.name, "step": pinned.step}
+    return {"run": found.run, "file": found}
+
+
+def _outside(path: Path, settings: Any) -> dict[str, Any]:
+    """A checkpoint file given by path; its run when it is one of a run's (``runs/<id>/checkpoints/``)."""
+    path = Path(path).resolve()
+    ref: dict[str, Any] = {"path": str(path)}
+    run_dir = path.parent.parent
+    if path.parent.name == "checkpoints" and run_dir.parent == Path(settings.runs_dir).resolve() \
+            and run_dir.name.isdigit():
+        ref["run"] = int(run_dir.name)
+    return ref
 
 
 def _folder_param(ref: FolderRef | None, path: Path | None, settings: Any, field_name: str) -> dict[str, str] | None:
@@ -114,19 +135,13 @@ def _folder_param(ref: FolderRef | None, path: Path | None, settings: Any, field
     return {"dir": str(path.resolve())} if path is not None else None
 
 
-def _test_split(settings: Any, session: Session, run_id: int) -> list[Any]:
-    """The run's held-out test split (sample ids); FieldError when there is none to evaluate."""
+def _test_split(settings: Any, session: Session, run_id: int) -> None:
+    """FieldError unless the run exists and holds a held-out test split to evaluate on."""
     try:
         training.get_run(session, run_id)
-    except NotFound as exc:
+        training.test_split(settings.runs_dir, run_id)
+    except (NotFound, InvalidInput) as exc:
         raise FieldError("run", str(exc)) from None
-    path = training.run_dir(settings.runs_dir, run_id) / "run.json"
-    if not path.is_file():
-        raise FieldError("run", f"run {run_id} has no run.json")
-    test = json.loads(path.read_text())["splits"].get("test") or []
-    if not test:
-        raise FieldError("run", f"run {run_id} has an empty test split: launch a run with a test share")
-    return test
 
 
 def folder_of(ref: dict[str, str] | None, settings: Any) -> Path | None:
@@ -144,11 +159,7 @@ def checkpoint_of(ref: dict[str, Any] | None, settings: Any) -> Path | None:
         return None
     if "path" in ref:
         return Path(ref["path"])
-    found = next((f for f in registry.run_checkpoints(settings.runs_dir, int(ref["run"])) if f.name == ref["file"]),
-                 None)
-    if found is None:
-        raise ValueError(f"run {ref['run']} no longer has checkpoint {ref['file']}")
-    return found.path
+    return registry.run_checkpoint(settings.runs_dir, int(ref["run"]), ref["file"], best_step=ref.get("step")).path
 
 
 def open_samples(params: dict[str, Any], settings: Any) -> Any:
@@ -157,10 +168,14 @@ def open_samples(params: dict[str, Any], settings: Any) -> Any:
     if folder is not None:
         return open_reader(params["format"], folder, **params["reader_options"])
     run = json.loads((training.run_dir(settings.runs_dir, int(params["run"])) / "run.json").read_text())
-    test_ids = run["splits"].get("test", [])
-    if not test_ids:
-        raise ValueError(f"run {params['run']} has an empty test split")
+    test_ids = training.test_split(settings.runs_dir, int(params["run"]))
     return VersionReader(run["dataset"], settings.media_root, sample_ids=test_ids)
+
+
+def report_dir(params: dict[str, Any], settings: Any, job_id: int) -> Path:
+    """Where an evaluate job writes its report: the command line's ``--out``, else the workspace's
+    ``evaluations/<job id>``."""
+    return Path(params["out"]) if params["out"] else Path(settings.home) / "evaluations" / str(job_id)
 
 
 def evaluate_job(ctx: JobContext) -> dict[str, Any]:
@@ -168,7 +183,7 @@ def evaluate_job(ctx: JobContext) -> dict[str, Any]:
     the headline table (per method and region: EPE, bad-2) and where the report is. The job's
     ``evaluations`` row gets that summary and, for database samples, per-sample results."""
     p, settings = ctx.params, ctx.settings
-    out = Path(p["out"]) if p["out"] else Path(settings.home) / "evaluations" / str(ctx.job_id)
+    out = report_dir(p, settings, ctx.job_id)
     with transaction(ctx.sessions) as s:
         evaluation_id = evaluations.evaluation_for_job(s, ctx.job_id, p).id
     reader = open_samples(p, settings)

@@ -85,8 +85,8 @@ def check_fit(config: Config, *, nproc: int, device: str, memory_gb: float,
     if smallest_image is not None and (height > smallest_image[0] or width > smallest_image[1]):
         raise FieldError("crop", f"{height}x{width} is larger than the smallest image of the selected data "
                                f"({smallest_image[0]}x{smallest_image[1]}); try {suggest_crop(config, smallest_image)}")
-    if config.train.batch_size < nproc:
-        raise FieldError("batch", f"a batch of {config.train.batch_size} cannot be shared by {nproc} processes")
+    if config.train.batch_size % nproc:
+        raise FieldError("batch", f"a batch of {config.train.batch_size} does not divide among {nproc} processes")
     estimate = estimate_memory(config, nproc=nproc, device=device)
     if estimate.total_mb > memory_gb * 1024:
         raise FieldError("crop", f"the run would need about {estimate.total_mb / 1024:.1f} GB "
@@ -122,5 +122,10 @@ def check_worker(config: Config, launch: Mapping[str, Any], settings: Settings) 
                                   "(train_max_nproc)")
     if devices.startswith("cuda") and settings.train_devices != "cuda":
         raise FieldError("devices", f"{devices}, and this train worker has no GPU (train_devices = cpu)")
-    device = devices if devices != "auto" else settings.train_devices
-    return check_fit(config, nproc=nproc, device=device, memory_gb=settings.train_memory_gb, smallest_image=None)
+    return check_fit(config, nproc=nproc, device=train_device(devices, settings), memory_gb=settings.train_memory_gb,
+                     smallest_image=None)
+
+
+def train_device(devices: str, settings: Settings) -> str:
+    """The device kind a launch's ``devices`` trains on: ``auto`` is what the train workers have."""
+    return settings.train_devices if devices == "auto" else devices

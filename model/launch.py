@@ -30,6 +30,7 @@ from dataset.readers import READER_FORMATS
 from dataset.services.errors import FieldError, InvalidInput
 from dataset.services.training import DEFAULT_SPLIT, SAMPLE_KINDS, parse_split
 from dataset.services.validate import DB_INT_MAX
+from dataset.settings import DATASET_ROOT_NAME
 from model.align import ALIGN_RULES
 from model.evaluate import RESOLUTIONS
 from model.methods import METHODS, NETWORK_METHODS, method_key
@@ -42,7 +43,7 @@ SEED_MAX = 2**32 - 1
 MAX_DISPARITY = 4096  # pixels, SGBM's search range
 
 Id = Annotated[int, Field(ge=1, le=DB_INT_MAX)]
-_ROOT = r"^[A-Za-z0-9_.-]{1,64}$"
+_ROOT = f"^{DATASET_ROOT_NAME}$"
 _CHECKPOINT_NAME = r"^(best|last|best\.pt|(step|best_step)_[0-9]{7,12}\.pt)$"
 _CROP_TEXT = re.compile(r"([0-9]{1,5})[xX×]([0-9]{1,5})")
 _DEVICES = r"^(auto|cpu|cuda|cuda:[0-9]{1,3}(,[0-9]{1,3}){0,63})$"
@@ -228,9 +229,6 @@ def validate(schema: type[_Strict], body: Any, settings: Any = None) -> Any:
         error = exc.errors(include_url=False, include_input=False)[0]
         # A list's item is its list's field (what a form marks): crop, not crop.0.
         field = ".".join(str(p) for p in error["loc"] if not isinstance(p, int))
-        cause = (error.get("ctx") or {}).get("error")
-        if isinstance(cause, FieldError):
-            raise cause from None
         raise FieldError(field, _reason(error)) from None
 
 

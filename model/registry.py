@@ -12,8 +12,10 @@ link ``best_step_XXXXXXX.pt`` that stays put.
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
+import uuid
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,10 +25,9 @@ from sqlalchemy.orm import Session
 from dataset.atomic import atomic_write_bytes
 from dataset.services import training
 from dataset.services.errors import InvalidInput, NotFound
+from model.train import BEST_NAME, CHECKPOINT_DIR, KEEP_FILE
 
 CURRENT = "current.json"
-KEEP = "keep.json"
-CHECKPOINT_DIR = "checkpoints"
 ALIASES = ("best", "last")
 
 
@@ -54,11 +55,12 @@ def run_checkpoints(runs_dir: Path, run_id: int) -> list[CheckpointFile]:
 
 def run_checkpoint(runs_dir: Path, run_id: int, which: str, *, best_step: int | None) -> CheckpointFile:
     """``which`` = ``best``, ``last`` or a file name of the run's checkpoints; ``best_step`` is the
-    run's (what ``best.pt`` holds). NotFound saying what the run has when there is no such file."""
+    run's (what ``best.pt`` holds, as the database last heard). NotFound saying what the run has
+    when there is no such file."""
     files = run_checkpoints(runs_dir, run_id)
-    if which == "best":
-        best = next((f for f in files if f.name == "best.pt"), None)
-        if best is None or best_step is None:
+    if which in ("best", BEST_NAME):
+        best = next((f for f in files if f.name == BEST_NAME), None)
+        if best is None:
             raise NotFound(f"run {run_id} has no best checkpoint yet: it appears after the first validation")
         return CheckpointFile(run_id, best.name, best_step, best.path, best.bytes)
     if which == "last":
@@ -77,29 +79,46 @@ def named_checkpoints(session: Session, runs_dir: Path, limit: int = 50) -> list
     """What a form offers to start from or evaluate: each recent run's ``best`` and ``last``, with
     their steps — ``{"run", "checkpoint", "label"}``, newest run first."""
     choices = []
-    for run in training.list_runs(session)[:limit]:
-        files = run_checkpoints(runs_dir, run.id)
-        if run.best_step is not None and any(f.name == "best.pt" for f in files):
-            choices.append({"run": run.id, "checkpoint": "best", "label": f"run {run.id} · best (step {run.best_step})"})
+    for run_id, best_step in training.recent_runs(session, limit):
+        files = run_checkpoints(runs_dir, run_id)
+        if best_step is not None and any(f.name == BEST_NAME for f in files):
+            choices.append({"run": run_id, "checkpoint": "best", "label": f"run {run_id} · best (step {best_step})"})
         last = next((f for f in files if f.name.startswith("step_")), None)
         if last is not None:
-            choices.append({"run": run.id, "checkpoint": "last", "label": f"run {run.id} · last (step {last.step})"})
+            choices.append({"run": run_id, "checkpoint": "last", "label": f"run {run_id} · last (step {last.step})"})
     return choices
 
 
+def freeze(checkpoint: CheckpointFile) -> tuple[CheckpointFile, bool]:
+    """The checkpoint under a name validation never replaces: ``best.pt`` becomes a hard link
+    ``best_step_N.pt``, N read from the linked file itself (a trainer replacing ``best.pt`` meanwhile
+    cannot mislabel it); other files stay as they are. Returns (the file, whether it was created
+    now). ValueError when the file is not a checkpoint that loads."""
+    if checkpoint.name != BEST_NAME:
+        return checkpoint, False
+    from model.checkpoint import load_checkpoint
+
+    pending = checkpoint.path.with_name(f".pin-{uuid.uuid4().hex}.pt")
+    try:
+        try:
+            os.link(checkpoint.path, pending)
+        except OSError:  # a file system without hard links
+            atomic_write_bytes(pending, checkpoint.path.read_bytes())
+        step = int(load_checkpoint(pending, label=checkpoint.label)["step"])
+        frozen = pending.with_name(f"best_step_{step:07d}.pt")
+        created = not frozen.exists()
+        if created:
+            os.replace(pending, frozen)
+    finally:
+        pending.unlink(missing_ok=True)
+    return CheckpointFile(checkpoint.run, frozen.name, step, frozen, frozen.stat().st_size), created
+
+
 def pin(checkpoint: CheckpointFile) -> CheckpointFile:
-    """The same weights under a name that rotation never deletes and validation never replaces:
-    ``best.pt`` becomes ``best_step_N.pt``; the file is listed in its run's ``keep.json``."""
-    if checkpoint.name == "best.pt":
-        frozen = checkpoint.path.with_name(f"best_step_{checkpoint.step:07d}.pt")
-        if not frozen.exists():
-            try:
-                os.link(checkpoint.path, frozen)
-            except OSError:
-                atomic_write_bytes(frozen, checkpoint.path.read_bytes())
-        checkpoint = CheckpointFile(checkpoint.run, frozen.name, checkpoint.step, frozen, frozen.stat().st_size)
-    keep_checkpoint(checkpoint.path)
-    return checkpoint
+    """:func:`freeze` the checkpoint and list it in its run's ``keep.json``, so rotation never deletes it."""
+    frozen, _ = freeze(checkpoint)
+    keep_checkpoint(frozen.path)
+    return frozen
 
 
 def keep_checkpoint(checkpoint: Path) -> None:
@@ -107,22 +126,25 @@ def keep_checkpoint(checkpoint: Path) -> None:
 
     The run directory is the checkpoint's folder's parent (``RUN_DIR/checkpoints/x.pt``); a
     checkpoint outside a run directory has no rotation to fear and is left alone. Entries are
-    relative to the run directory, so a workspace can move.
+    relative to the run directory, so a workspace can move. Two pins at once (a promote and an
+    evaluation's launch) take turns on a lock, so neither entry is lost.
     """
     checkpoint = Path(checkpoint).resolve()
     run_dir = checkpoint.parent.parent
     if checkpoint.parent.name != CHECKPOINT_DIR or not (run_dir / "run.json").is_file():
         return
-    path = run_dir / KEEP
-    kept: list[str] = []
-    if path.is_file():
-        try:
-            kept = list(json.loads(path.read_text(encoding="utf-8")).get("paths", []))
-        except (OSError, ValueError, AttributeError):
-            kept = []
-    entry = str(checkpoint.relative_to(run_dir))
-    if entry not in kept and str(checkpoint) not in kept:
-        atomic_write_bytes(path, json.dumps({"paths": [*kept, entry]}, indent=1).encode())
+    path = run_dir / KEEP_FILE
+    with (run_dir / f"{KEEP_FILE}.lock").open("a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        kept: list[str] = []
+        if path.is_file():
+            try:
+                kept = list(json.loads(path.read_text(encoding="utf-8")).get("paths", []))
+            except (OSError, ValueError, AttributeError):
+                kept = []
+        entry = str(checkpoint.relative_to(run_dir))
+        if entry not in kept and str(checkpoint) not in kept:
+            atomic_write_bytes(path, json.dumps({"paths": [*kept, entry]}, indent=1).encode())
 
 
 # --- the current model -------------------------------------------------------------------------
@@ -176,6 +198,8 @@ def promote(settings: Any, checkpoint: CheckpointFile | Path, *, run: int | None
         path, run, step, file = checkpoint.path, checkpoint.run, checkpoint.step, checkpoint.name
     else:
         path, file = Path(checkpoint).resolve(), Path(checkpoint).name
+        if run is not None and path.parent != (training.run_dir(Path(settings.runs_dir), run) / CHECKPOINT_DIR).resolve():
+            run = None  # a file from elsewhere is no run's checkpoint, whichever run promoted it
         keep_checkpoint(path)
     home = Path(settings.home).resolve()
     stored = str(path.relative_to(home)) if path.is_relative_to(home) else str(path)

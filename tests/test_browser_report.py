@@ -14,7 +14,7 @@ import pytest
 from dataset.db import migrate, transaction
 from dataset.models import Frame, FrameState, Role, Sample, SampleState
 from dataset.services import users as user_service
-from tests.browser import login, serving
+from tests.browser import login, page_with_errors, serving
 from tests.conftest import PASSWORD, make_settings
 from tests.evaluations_data import evaluated_database
 from webapp.runtime import Runtime
@@ -46,19 +46,11 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, dict
         yield url, states, ids
 
 
-def _page(browser):  # type: ignore[no-untyped-def]
-    page = browser.new_page(viewport={"width": 1366, "height": 768})
-    errors: list[str] = []
-    page.on("pageerror", lambda error: errors.append(str(error)))
-    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-    return page, errors
-
-
 def test_the_report_fits_names_its_samples_and_sorts_worst_first(browser, server, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     from playwright.sync_api import expect
 
     url, _, ids = server
-    page, errors = _page(browser)
+    page, errors = page_with_errors(browser)
     login(page, url, "curator", PASSWORD)
     page.goto(f"{url}/evaluations/1")
     paper = page.locator("#paper-table")
@@ -109,7 +101,7 @@ def test_samples_offer_what_their_state_allows_and_count_across_reloads(browser,
     from playwright.sync_api import expect
 
     url, states, _ = server
-    page, errors = _page(browser)
+    page, errors = page_with_errors(browser)
     login(page, url, "curator", PASSWORD)
 
     page.goto(f"{url}/samples?state=accepted")
@@ -147,7 +139,7 @@ def test_back_from_the_3d_preview_lands_on_the_sample_page(browser, server) -> N
     from playwright.sync_api import expect
 
     url, states, _ = server
-    page, _ = _page(browser)
+    page, _ = page_with_errors(browser)
     login(page, url, "curator", PASSWORD)
     page.goto(f"{url}/samples?state=all")
     page.locator(f"#samples-grid .tile[data-id='{states['accepted']}']").click()

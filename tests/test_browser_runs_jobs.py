@@ -15,7 +15,7 @@ from dataset.db import migrate, transaction
 from dataset.models import Job, JobState, Role, RunState, TrainingRun, utcnow
 from dataset.services import training
 from dataset.services import users as user_service
-from tests.browser import login, serving
+from tests.browser import login, page_with_errors, serving
 from tests.conftest import PASSWORD, make_settings
 from tests.test_run_logs import write_launch
 from webapp.runtime import Runtime
@@ -73,14 +73,6 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, Path
         yield url, run_dir, {"done": done, "live": live, **{f"job_{k}": v for k, v in jobs.items()}}
 
 
-def _page(browser):  # type: ignore[no-untyped-def]
-    page = browser.new_page(viewport={"width": 1366, "height": 768})
-    errors: list[str] = []
-    page.on("pageerror", lambda error: errors.append(str(error)))
-    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-    return page, errors
-
-
 def _help_opens(page) -> None:  # type: ignore[no-untyped-def]
     from playwright.sync_api import expect
 
@@ -95,7 +87,7 @@ def test_a_running_runs_log_grows_links_its_job_and_downloads_whole(browser, ser
     from playwright.sync_api import expect
 
     url, run_dir, ids = server
-    page, errors = _page(browser)
+    page, errors = page_with_errors(browser)
     login(page, url, "curator", PASSWORD)
     page.goto(f"{url}/models/runs/{ids['live']}")
     log = page.locator("#run-log")
@@ -134,7 +126,7 @@ def test_the_jobs_list_says_what_a_train_job_made_with_readable_numbers(browser,
     from playwright.sync_api import expect
 
     url, _, ids = server
-    page, errors = _page(browser)
+    page, errors = page_with_errors(browser)
     login(page, url, "curator", PASSWORD)
     page.goto(f"{url}/jobs")
     row = page.locator(f"#jobs tbody tr[data-job-id='{ids['job_done']}']")
@@ -170,7 +162,7 @@ def test_compare_warns_when_the_runs_were_trained_on_different_data(browser, ser
     from playwright.sync_api import expect
 
     url, _, ids = server
-    page, errors = _page(browser)
+    page, errors = page_with_errors(browser)
     login(page, url, "curator", PASSWORD)
     page.goto(f"{url}/models/compare?ids={ids['done']},{ids['live']}")
     warning = page.locator("#compare-versions")
@@ -195,7 +187,7 @@ def test_compare_warns_when_the_runs_were_trained_on_different_data(browser, ser
 
 def test_the_log_is_curators(browser, server) -> None:  # type: ignore[no-untyped-def]
     url, _, ids = server
-    page, _ = _page(browser)
+    page, _ = page_with_errors(browser)
     login(page, url, "annotator", PASSWORD)
     assert page.goto(f"{url}/models/runs/{ids['live']}/log").status == 403
     assert page.goto(f"{url}/models/runs/{ids['live']}/log.txt").status == 403

@@ -14,7 +14,7 @@ from dataset.services import run_logs, training
 from model.report import picture_caption, report_html, sample_label
 from tests.test_runs import bearer
 
-ABSOLUTE = re.compile(r"(?<![\w:/.~>-])/(?:[\w.+@-]+/)+")
+ABSOLUTE = re.compile(r"(?<![\w:/.~\]-])/(?:[\w.+@-]+/)+")
 
 
 def _queued_run(runtime) -> int:  # type: ignore[no-untyped-def]
@@ -82,7 +82,7 @@ def test_the_log_routes(client, tokens, runtime) -> None:  # type: ignore[no-unt
                  f"{Path(os.__file__).parent}/warnings.py:1: UserWarning\n")
     tail = client.get(f"{url}?lines=2", headers=bearer(tokens, "curator")).json
     assert tail["lines"][0] == "── 2 of 2: logs/r1/attempt_0/0/stderr.log ──"
-    assert re.fullmatch(r"<python>/lib/python3\.\d+/warnings\.py:1: UserWarning", tail["lines"][1]), tail["lines"]
+    assert re.fullmatch(r"\[python\]/lib/python3\.\d+/warnings\.py:1: UserWarning", tail["lines"][1]), tail["lines"]
     assert client.get(f"{url}?lines=0", headers=bearer(tokens, "curator")).status_code == 400
     assert client.get(f"{url}?lines=x", headers=bearer(tokens, "curator")).status_code == 400
     assert client.get(url, headers=bearer(tokens, "annotator")).status_code == 403

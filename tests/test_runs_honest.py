@@ -9,7 +9,6 @@ import json
 import math
 import os
 import signal
-import time
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +31,7 @@ from tests.test_runs import _queued_run
 from tests.test_runs import samples as samples  # accepted samples in the runtime's database
 from tests.train_runs import events, make_run, parameters, split_names, train_here
 from tests.train_runs import native as native  # the small native export fixture
+from tests.waiting import until
 from tests.workers import extra_settings, queue_settings, rt, start_worker, wait_for  # noqa: F401  (fixtures)
 from webapp.jobs import runs as run_control
 
@@ -220,14 +220,6 @@ def _run(rt, run_id: int) -> dict[str, Any]:  # type: ignore[no-untyped-def]
         return training.run_json(s.get(TrainingRun, run_id), rt.settings.runs_dir)
 
 
-def _until(predicate, timeout: float, what: str) -> Any:  # type: ignore[no-untyped-def]
-    deadline = time.monotonic() + timeout
-    while not (value := predicate()):
-        assert time.monotonic() < deadline, f"timed out waiting for {what}"
-        time.sleep(0.1)
-    return value
-
-
 def _ranks(directory: Path) -> tuple[int, list[int]]:
     """The recorded process group and its ranks (the members but torchrun, the group's leader)."""
     pgid = json.loads((directory / TRAINERS_FILE).read_text())["pgid"]
@@ -240,7 +232,7 @@ def test_cancel_checkpoints_the_step_it_stopped_at_and_resume_goes_on_from_there
     start_worker("--queue", "train")
     # Two ranks, no checkpoint before step 100000: only the cancel's checkpoint can exist.
     run_id, job_id, directory = _launch(rt, nproc=2, **{"train.steps": 100_000})
-    _until(lambda: events(directory, "step"), 120, "the first step")
+    until(lambda: events(directory, "step"), 120, "the first step")
     pgid, _ = _ranks(directory)
     run_control.cancel(rt, run_id, None)
     job = wait_for(rt, job_id, lambda j: j.state.finished, 60)
@@ -259,9 +251,9 @@ def test_cancel_checkpoints_the_step_it_stopped_at_and_resume_goes_on_from_there
     assert rank_logs and not any("Traceback" in log or "find_unused_parameters" in log for log in rank_logs)
 
     run_control.resume(rt, run_id, None)
-    _until(lambda: len(events(directory, "start")) == 2, 120, "the resumed start")
+    until(lambda: len(events(directory, "start")) == 2, 120, "the resumed start")
     assert events(directory, "start")[-1]["resumed_from_step"] == stopped
-    _until(lambda: _run(rt, run_id)["resumed_from_step"] == stopped, 30, "the mirrored resume")
+    until(lambda: _run(rt, run_id)["resumed_from_step"] == stopped, 30, "the mirrored resume")
     run_control.cancel(rt, run_id, None)
     wait_for(rt, job_id, lambda j: j.state.finished and j.attempts == 2, 60)
     assert _run(rt, run_id)["state"] == "cancelled"
@@ -273,7 +265,7 @@ def test_cancel_checkpoints_the_step_it_stopped_at_and_resume_goes_on_from_there
 def test_a_rank_killed_by_sigkill_is_named_in_the_reason(rt, start_worker) -> None:  # type: ignore[no-untyped-def]
     start_worker("--queue", "train")
     run_id, job_id, directory = _launch(rt, **{"train.steps": 100_000})
-    _until(lambda: events(directory, "step"), 120, "the first step")
+    until(lambda: events(directory, "step"), 120, "the first step")
     pgid, ranks = _ranks(directory)
     assert len(ranks) == 1, (group_members(pgid), pgid, wait_for(rt, job_id, lambda j: True).log[-3000:])
     os.kill(ranks[0], signal.SIGKILL)  # what the kernel's OOM killer does

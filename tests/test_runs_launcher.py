@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 from model.launcher import ProcessGroup, device_env, group_members, torchrun_command
+from tests.waiting import until
 
 # A leader that starts two grandchildren which ignore SIGTERM, then prints and sleeps: the worst
 # case for a cancel (only SIGKILL to the whole group stops them).
@@ -21,18 +22,11 @@ time.sleep(600)
 """
 
 
-def _wait_for(predicate, timeout: float = 20.0) -> None:  # type: ignore[no-untyped-def]
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(0.05)
-
-
 def test_stop_kills_the_whole_group_and_leaves_no_process() -> None:
     group = ProcessGroup([sys.executable, "-c", TREE])
     seen: list[str] = []
     # The two children write to one pipe at once, so their lines may interleave: count the bytes.
-    _wait_for(lambda: seen.extend(group.lines()) or "".join(seen).count("child up") == 2)
+    until(lambda: seen.extend(group.lines()) or "".join(seen).count("child up") == 2)
     assert "leader up" in seen
     assert group.pgid != os.getpgrp(), "the trainers must not share the worker's process group"
     members = group_members(group.pgid)

@@ -10,7 +10,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +35,7 @@ from model.train.checkpoints import step_checkpoints
 from model.train.watch import alive
 from tests.runs_data import add_accepted_samples
 from tests.train_runs import events
+from tests.waiting import until
 from tests.workers import extra_settings, queue_settings, rt, wait_for  # noqa: F401  (fixtures)
 from webapp.jobs import runs as run_control
 from webapp.jobs.handlers import HANDLERS
@@ -66,14 +66,6 @@ def _launch(rt) -> tuple[int, int, Path]:  # type: ignore[no-untyped-def]
 def _state(rt, run_id: int) -> str:  # type: ignore[no-untyped-def]
     with rt.sessions() as s:
         return training.effective_state(s.get(TrainingRun, run_id)).value
-
-
-def _until(predicate, timeout: float, what: str) -> Any:  # type: ignore[no-untyped-def]
-    deadline = time.monotonic() + timeout
-    while not (value := predicate()):
-        assert time.monotonic() < deadline, f"timed out waiting for {what}"
-        time.sleep(0.1)
-    return value
 
 
 def _start_trainers(rt, run_id: int, directory: Path) -> ProcessGroup:  # type: ignore[no-untyped-def]
@@ -115,7 +107,7 @@ def test_cancel_is_accepted_while_a_failed_run_s_trainers_live_and_ends_them(rt)
     run_id, job_id, directory = _launch(rt)
     group = _start_trainers(rt, run_id, directory)
     try:
-        _until(lambda: events(directory, "step"), 120, "the first step")
+        until(lambda: events(directory, "step"), 120, "the first step")
         with transaction(rt.sessions) as s:  # the job is gone (its handler crashed), the trainers train on
             s.get(TrainingRun, run_id).state = RunState.running
             s.get(Job, job_id).state = JobState.failed
@@ -137,12 +129,12 @@ def test_a_sigkilled_torchrun_takes_its_ranks_along(rt) -> None:  # type: ignore
     run_id, _, directory = _launch(rt)
     group = _start_trainers(rt, run_id, directory)
     try:
-        _until(lambda: events(directory, "step"), 120, "the first step")
+        until(lambda: events(directory, "step"), 120, "the first step")
         ranks = [pid for pid in group_members(group.pgid) if pid != group.pgid]
         assert len(ranks) == 1 and os.getpgid(ranks[0]) != group.pgid  # torchrun's rank leads its own group
         os.kill(group.pgid, signal.SIGKILL)  # the agent alone: its rank is in no group of the run's
         group.wait()
-        _until(lambda: not any(alive(pid) for pid in ranks), 10, "the rank's end")
+        until(lambda: not any(alive(pid) for pid in ranks), 10, "the rank's end")
     finally:
         group.stop(grace_s=1)
 
@@ -150,7 +142,7 @@ def test_a_sigkilled_torchrun_takes_its_ranks_along(rt) -> None:  # type: ignore
 def test_stop_recorded_ends_children_in_sessions_of_their_own(tmp_path: Path) -> None:
     group = ProcessGroup([sys.executable, "-c", TREE])
     try:
-        _until(lambda: len(group_members(group.pgid)) == 3, 20, "the children")
+        until(lambda: len(group_members(group.pgid)) == 3, 20, "the children")
         record_group(tmp_path, group.pgid)
         assert sorted(recorded_members(tmp_path)) == sorted(group_members(group.pgid))
         assert stop_recorded(tmp_path, grace_s=0.5)

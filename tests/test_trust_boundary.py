@@ -288,7 +288,7 @@ def test_no_answer_shows_an_absolute_server_path(client, tokens, runtime, sample
         assert str(tmp_path) not in text and str(Path(training.__file__).parent) not in text, answer.request.path
     shown = client.get(f"/api/v1/jobs/{job_id}", headers=curator).json
     assert shown["params"]["path"] == "incoming/x.mp4" and "media/ab/cd" in shown["log"]
-    assert "<app>/dataset/services/training.py" in shown["log"]
+    assert "[app]/dataset/services/training.py" in shown["log"]
 
 
 def test_a_run_started_from_a_planted_pickle_fails_without_running_it(client, tokens, runtime, samples,

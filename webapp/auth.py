@@ -96,7 +96,10 @@ def _unauthenticated_message() -> str:
 def sign_in(user: User) -> None:
     """Start a server-side session for ``user`` and put its id in the cookie."""
     # Nothing issued before the login outlives it: the CSRF token of the login page (a planted
-    # one included) is void, and the next page gets a new one.
+    # one included) is void, and the next page gets a new one; a session this browser had ends on
+    # the server too, so a copy of its old cookie is worthless.
+    if old := session.get(SESSION_ID):
+        session_service.end_session(g.db, old)
     session.clear()
     g.pop(current_app.config.get("WTF_CSRF_FIELD_NAME", "csrf_token"), None)
     # A fresh random id per login: an id seen before (a copied cookie) never comes back to life.

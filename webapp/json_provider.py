@@ -7,21 +7,11 @@ Python's json writes NaN and Infinity as the bare words ``NaN`` / ``Infinity``, 
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 from flask.json.provider import DefaultJSONProvider
 
-
-def finite(value: Any) -> Any:
-    """``value`` with every non-finite float inside dicts, lists and tuples replaced by None."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {key: finite(item) for key, item in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [finite(item) for item in value]
-    return value
+from dataset.finite import finite_json
 
 
 class FiniteJSONProvider(DefaultJSONProvider):
@@ -32,4 +22,4 @@ class FiniteJSONProvider(DefaultJSONProvider):
         try:  # the common case, no NaN anywhere: one pass
             return super().dumps(obj, default=default, allow_nan=False, **kwargs)
         except ValueError:  # "Out of range float values are not JSON compliant"
-            return super().dumps(finite(obj), default=lambda o: finite(default(o)), allow_nan=False, **kwargs)
+            return super().dumps(finite_json(obj), default=lambda o: finite_json(default(o)), allow_nan=False, **kwargs)

@@ -27,6 +27,7 @@ requests that need the queue on that Redis answer 503 anyway.
 from __future__ import annotations
 
 import logging
+import math
 import sqlite3
 import threading
 import time
@@ -45,6 +46,8 @@ from dataset.settings import Settings
 log = logging.getLogger(__name__)
 limiter = Limiter(key_func=get_remote_address)
 T = TypeVar("T")
+SLOWED_AT_ONCE = 2  # logins sleeping at once, of the server's threads (waitress: 8)
+_SLOWED = threading.BoundedSemaphore(SLOWED_AT_ONCE)
 FIRST_WAIT_S = 0.25  # the first slowed-down login's wait; each further failure doubles it
 
 
@@ -112,10 +115,19 @@ class LoginCounters:
 
         return _unless_down("login slow-down", 0.0, wait)
 
-    def slow_down(self, settings: Settings) -> None:
-        """Wait :meth:`wait_s` before the password is checked (a plain sleep: no lock is held)."""
-        if (seconds := self.wait_s(settings)) > 0:
+    def slow_down(self, settings: Settings) -> int | None:
+        """Wait :meth:`wait_s` before the password is checked (a plain sleep: no lock is held).
+        At most :data:`SLOWED_AT_ONCE` logins wait at a time, so a flood of slowed logins cannot
+        hold every server thread: past that, returns the seconds to come back after (no wait)."""
+        if (seconds := self.wait_s(settings)) <= 0:
+            return None
+        if not _SLOWED.acquire(blocking=False):
+            return max(1, math.ceil(seconds))
+        try:
             time.sleep(seconds)
+        finally:
+            _SLOWED.release()
+        return None
 
     def failed(self) -> None:
         def hit() -> None:

@@ -34,8 +34,6 @@ SPLITS = ("train", "val", "test")
 DEFAULT_SPLIT = "train=0.8,val=0.1,test=0.1"
 SAMPLE_KINDS = ("synthesized", "capture")
 DATABASE = "database"
-MAX_PROCESSES = 64
-_DEVICES = re.compile(r"^(auto|cpu|cuda|cuda:\d+(,\d+)*)$")
 _CHUNK = 1000  # ids per IN (…) query: below every database's limit on bound parameters
 _CHECKPOINT = re.compile(r"^(?:step_(\d{7,})|best|best_step_(\d{7,}))\.pt$")
 
@@ -111,18 +109,14 @@ def validate_selection(selection: DataSelection) -> None:
 
 
 def validate_launch(launch: Launch) -> None:
-    if not 1 <= launch.nproc <= MAX_PROCESSES:
-        raise InvalidInput(f"processes must be 1..{MAX_PROCESSES}, got {launch.nproc}")
+    """What the launch schema (``model/launch.py``) does not see: the command line's multi-node
+    options and the start file. Processes, devices and seeds passed the schema."""
     if not 1 <= launch.nnodes <= 1024:
         raise InvalidInput(f"nodes must be 1..1024, got {launch.nnodes}")
     if launch.nnodes > 1 and not launch.rdzv_endpoint:
         raise InvalidInput("a multi-node run needs a rendezvous endpoint HOST:PORT that every node reaches")
     if launch.rdzv_endpoint and not re.match(r"^[A-Za-z0-9_.\-\[\]:]+:\d{1,5}$", launch.rdzv_endpoint):
         raise InvalidInput(f"rendezvous endpoint {launch.rdzv_endpoint!r}: expected HOST:PORT")
-    if not _DEVICES.match(launch.devices):
-        raise InvalidInput(f"devices {launch.devices!r}: expected auto, cpu, cuda or cuda:0,1,…")
-    if launch.seed < 0:
-        raise InvalidInput(f"seed must be ≥ 0, got {launch.seed}")
     if launch.init_checkpoint is not None and not Path(launch.init_checkpoint).is_file():
         raise InvalidInput(f"init checkpoint {launch.init_label or launch.init_checkpoint} is not a file")
 
@@ -257,6 +251,18 @@ def engine_device(devices: str) -> str | None:
     return "cuda" if devices.startswith("cuda") else devices
 
 
+def test_split(runs_dir: Path, run_id: int) -> list[Any]:
+    """The held-out test split of a run (its ``run.json``'s sample ids or names); InvalidInput when
+    it has none, so an evaluation says why before it starts."""
+    path = run_dir(runs_dir, run_id) / "run.json"
+    if not path.is_file():
+        raise InvalidInput(f"run {run_id} has no run.json")
+    test = json.loads(path.read_text(encoding="utf-8")).get("splits", {}).get("test") or []
+    if not test:
+        raise InvalidInput(f"run {run_id} has an empty test split: launch a run with a test share")
+    return list(test)
+
+
 def get_run(session: Session, run_id: int) -> TrainingRun:
     run = session.get(TrainingRun, run_id)
     if run is None:
@@ -339,6 +345,12 @@ def run_json(run: TrainingRun, runs_dir: Path, *, current: dict[str, Any] | None
 
 def _iso(value: Any) -> str | None:
     return value.isoformat() + "Z" if value is not None else None
+
+
+def recent_runs(session: Session, limit: int) -> list[tuple[int, int | None]]:
+    """(id, best step) of the newest ``limit`` runs: what a form lists, without their dataset versions."""
+    return [(row.id, row.best_step) for row in session.execute(
+        select(TrainingRun.id, TrainingRun.best_step).order_by(TrainingRun.id.desc()).limit(limit))]
 
 
 def list_runs(session: Session, run_ids: Sequence[int] | None = None) -> list[TrainingRun]:

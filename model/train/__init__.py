@@ -14,4 +14,7 @@ EXIT_ORPHANED = 4  # the watched process (--watch-pid) is gone
 EXIT_CODES = {"succeeded": EXIT_SUCCEEDED, "failed": EXIT_FAILED, "diverged": EXIT_DIVERGED,
               "cancelled": EXIT_SUCCEEDED}
 
+CHECKPOINT_DIR = "checkpoints"  # RUN_DIR/checkpoints: step_XXXXXXX.pt, best.pt, best_step_XXXXXXX.pt
+BEST_NAME = "best.pt"
+KEEP_FILE = "keep.json"  # RUN_DIR/keep.json: checkpoints the product keeps from rotation
 CANCEL_FILE = "cancel"  # RUN_DIR/cancel: the ranks stop after the step that sees it, checkpoint and exit

@@ -19,9 +19,8 @@ from typing import Any
 import numpy as np
 import torch
 
-CHECKPOINT_DIR = "checkpoints"
-BEST_NAME = "best.pt"
-KEEP_FILE = "keep.json"
+from model.train import BEST_NAME, CHECKPOINT_DIR, KEEP_FILE
+
 _STEP_NAME = re.compile(r"^step_(\d{7,})\.pt$")
 
 

@@ -47,8 +47,12 @@ compare.addEventListener("click", () => {
 function launchBody() {
   const f = form.elements;
   const body = { preset: f.preset.value, devices: f.devices.value, split: f.split.value.trim() };
-  for (const name of ["steps", "batch", "lr", "iters", "nproc", "seed"]) body[name] = numberOrNull(f[name]);
-  body.crop = f.crop.value.trim() || null;
+  // An empty field is left out: the launch takes the preset's (or the schema's) value.
+  for (const name of ["steps", "batch", "lr", "iters", "nproc", "seed"]) {
+    const value = numberOrNull(f[name]);
+    if (value !== null) body[name] = value;
+  }
+  if (f.crop.value.trim()) body.crop = f.crop.value.trim();
   if (f.init.value) {
     const [run, checkpoint] = f.init.value.split(":");
     body.init = { run: Number(run), checkpoint };

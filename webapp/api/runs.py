@@ -11,7 +11,6 @@ from flask_login import current_user
 
 from dataset.models import Role, User
 from dataset.services import training
-from dataset.services.errors import NotFound
 from model import registry
 from model.launch import FieldError, RunLaunch, validate
 from webapp.api.blueprint import api, int_arg, json_body
@@ -95,7 +94,5 @@ def promote_run(run_id: int) -> ResponseReturnValue:
 def download_checkpoint(run_id: int, name: str) -> ResponseReturnValue:
     """One of the run's checkpoint files by name (never a path the caller makes up, never a link)."""
     run = training.get_run(g.db, run_id)
-    found = next((f for f in registry.run_checkpoints(runtime().settings.runs_dir, run.id) if f.name == name), None)
-    if found is None:
-        raise NotFound(f"run {run_id} has no checkpoint {name!r}")
-    return send_file(found.path, as_attachment=True, download_name=f"run{run_id}_{name}", max_age=0)
+    found = registry.run_checkpoint(runtime().settings.runs_dir, run.id, name, best_step=run.best_step)
+    return send_file(found.path, as_attachment=True, download_name=f"run{run_id}_{found.name}", max_age=0)

@@ -4,7 +4,6 @@ estimate beside each measurement: how ``MEMORY_MB`` is calibrated for a (preset,
 
 from __future__ import annotations
 
-import json
 import subprocess
 import sys
 import tempfile
@@ -13,11 +12,9 @@ from typing import Any
 
 import numpy as np
 
-from dataset.readers.version import pin_dataset_version
-from dataset.synthetic import write_synthetic_dataset
 from model.fit import coefficients
 from model.presets import load_preset
-from webapp.benchmarks.workspace import accepted_samples_workspace
+from webapp.benchmarks.workspace import synthetic_version, write_train_run
 
 # (H, W, iterations): spans the lite preset's crop (192x320, 7) to four times its work per sample.
 POINTS = ((192, 320, 4), (192, 320, 7), (320, 512, 7), (384, 640, 7), (384, 640, 14))
@@ -44,26 +41,14 @@ def run_memory_bench(preset: str = "lite", points: tuple[tuple[int, int, int], .
     rows = []
     with tempfile.TemporaryDirectory(prefix="bench-memory-") as tmp:
         root = Path(tmp)
-        scenes = write_synthetic_dataset(root / "scenes", videos=1, seed=0, n_frames=2, width=width, height=height)
-        rt = accepted_samples_workspace(root / "ws", scenes)
-        try:
-            with rt.sessions() as s:
-                version = pin_dataset_version(s, rt.media)
-            media_root = rt.media.root
-        finally:
-            rt.close()
+        version, media_root = synthetic_version(root, width=width, height=height, n_frames=2)
         base, per_pixel = coefficients(preset, "cpu")
         for i, (h, w, iters) in enumerate(points):
             config = load_preset(preset, {"steps": STEPS, "checkpoint_every": STEPS, "val_every": STEPS,
                                           "crop": (h, w), "train_iters": iters, "batch_size": 1,
                                           "scale": (0.0, 0.0)})
             run_dir = root / f"run{i}"
-            run_dir.mkdir()
-            ids = [item["sample_id"] for item in version["items"]]
-            (run_dir / "run.json").write_text(json.dumps({
-                "config": config.to_dict(), "dataset": version, "media_root": str(media_root),
-                "init_checkpoint": None, "device": "cpu", "splits": {"train": ids, "val": [], "test": []},
-                "data": {"format": "database", "root": None}}))
+            write_train_run(run_dir, config, version, media_root)
             done = subprocess.run([sys.executable, "-c", _CHILD, str(run_dir)], capture_output=True, text=True,
                                   check=False)
             peak = [line for line in done.stdout.splitlines() if line.startswith("PEAK_KB")]

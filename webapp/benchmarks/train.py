@@ -4,18 +4,15 @@ dataset version of accepted synthetic samples made the product's way."""
 
 from __future__ import annotations
 
-import json
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
 from typing import Any
 
-from dataset.readers.version import pin_dataset_version
-from dataset.synthetic import write_synthetic_dataset
 from model.presets import load_preset
 from model.train.events import read_events
-from webapp.benchmarks.workspace import accepted_samples_workspace
+from webapp.benchmarks.workspace import synthetic_version, write_train_run
 
 
 def run_train_bench(steps: int = 8, processes: tuple[int, ...] = (1, 2)) -> dict[str, Any]:
@@ -26,18 +23,13 @@ def run_train_bench(steps: int = 8, processes: tuple[int, ...] = (1, 2)) -> dict
     with tempfile.TemporaryDirectory(prefix="bench-train-") as tmp:
         root = Path(tmp)
         # Frames at the crop's size, so the crop sees whole frames (scale augmentation aside).
-        scenes = write_synthetic_dataset(root / "scenes", videos=1, seed=0, n_frames=3, width=width, height=height)
-        rt = accepted_samples_workspace(root / "ws", scenes)
-        try:
-            with rt.sessions() as s:
-                version = pin_dataset_version(s, rt.media)
-            media_root = rt.media.root
-        finally:
-            rt.close()
+        version, media_root = synthetic_version(root, width=width, height=height, n_frames=3)
         out["samples"] = len(version["items"])
+        # Validation off and one checkpoint at the end: only training steps are timed.
+        timed = load_preset("lite", {"steps": steps + 1, "checkpoint_every": steps + 1, "val_every": steps + 1})
         for nproc in processes:
             run_dir = root / f"run{nproc}"
-            _write_run(run_dir, version, media_root, steps + 1)
+            write_train_run(run_dir, timed, version, media_root)
             command = [sys.executable, "-m", "model.train", str(run_dir)] if nproc == 1 else [
                 str(Path(sys.executable).with_name("torchrun")), "--standalone", f"--nproc-per-node={nproc}",
                 "-m", "model.train", str(run_dir)]
@@ -46,17 +38,6 @@ def run_train_bench(steps: int = 8, processes: tuple[int, ...] = (1, 2)) -> dict
                 raise RuntimeError(f"training with {nproc} process(es) failed: {result.stderr.strip()[-2000:]}")
             out[f"train_{nproc}proc_samples_per_s"] = round(_rate(run_dir, config.train.batch_size), 3)
     return out
-
-
-def _write_run(run_dir: Path, version: dict[str, Any], media_root: Path, steps: int) -> None:
-    # Validation off and one checkpoint at the end: only training steps are timed.
-    config = load_preset("lite", {"steps": steps, "checkpoint_every": steps, "val_every": steps})
-    run_dir.mkdir(parents=True)
-    ids = [item["sample_id"] for item in version["items"]]
-    (run_dir / "run.json").write_text(json.dumps({
-        "config": config.to_dict(), "dataset": version, "media_root": str(media_root), "init_checkpoint": None,
-        "device": "cpu", "splits": {"train": ids, "val": [], "test": []},
-        "data": {"format": "database", "root": None}}))
 
 
 def _rate(run_dir: Path, batch: int) -> float:

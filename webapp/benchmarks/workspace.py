@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -10,12 +11,15 @@ from sqlalchemy import select, update
 
 from dataset.db import migrate, transaction
 from dataset.models import Frame, FrameState, Sample, User
+from dataset.readers.version import pin_dataset_version
 from dataset.services import jobs as job_service
 from dataset.services import users as user_service
 from dataset.services.demo import seed_reviews_and_annotations
 from dataset.services.ingest import ingest_params
 from dataset.services.sample_review import review_sample
 from dataset.settings import load_settings, write_settings_file
+from dataset.synthetic import write_synthetic_dataset
+from model.presets import Config
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime
 
@@ -61,3 +65,25 @@ def accepted_samples_workspace(home: Path, scenes: list[Path]) -> Runtime:
         for sample_id in s.scalars(select(Sample.id).order_by(Sample.id)).all():
             review_sample(s, sample_id, curator, "accept")
     return rt
+
+
+def synthetic_version(root: Path, *, width: int, height: int, n_frames: int) -> tuple[dict[str, Any], Path]:
+    """One synthetic video of ``n_frames`` at ``width``×``height`` px made into accepted samples the
+    product's way, in a scratch workspace under ``root``: (its pinned dataset version, media root)."""
+    scenes = write_synthetic_dataset(root / "scenes", videos=1, seed=0, n_frames=n_frames, width=width, height=height)
+    rt = accepted_samples_workspace(root / "ws", scenes)
+    try:
+        with rt.sessions() as s:
+            return pin_dataset_version(s, rt.media), rt.media.root
+    finally:
+        rt.close()
+
+
+def write_train_run(run_dir: Path, config: Config, version: dict[str, Any], media_root: Path) -> None:
+    """``run_dir/run.json`` for ``python -m model.train``: every sample of ``version`` in training, on CPU."""
+    run_dir.mkdir(parents=True)
+    ids = [item["sample_id"] for item in version["items"]]
+    (run_dir / "run.json").write_text(json.dumps({
+        "config": config.to_dict(), "dataset": version, "media_root": str(media_root), "init_checkpoint": None,
+        "device": "cpu", "splits": {"train": ids, "val": [], "test": []},
+        "data": {"format": "database", "root": None}}))

@@ -11,7 +11,7 @@ from dataset.readers import READER_FORMATS
 from dataset.services.evaluations import dataset_label
 from model.align import ALIGN_RULES
 from model.evaluate import RESOLUTIONS
-from model.evaluation import DEFAULT_METHODS, EvalShellOptions, evaluation_params
+from model.evaluation import DEFAULT_METHODS, EvalShellOptions, evaluation_params, report_dir
 from model.launch import EvaluationLaunch, validate
 from model.methods import METHODS
 from webapp.cli.errors import service_errors
@@ -68,8 +68,8 @@ def evaluate_cmd(state: CliState, data: Path | None, fmt: str | None, methods: t
     job_id = run_job(state, "evaluate", params, f"evaluate {', '.join(params['methods'])} on {dataset_label(params)}",
                      wait=wait, here=here, quiet=as_json)
     if wait or here:
-        report_dir = Path(params["out"]) if params["out"] else state.settings.home / "evaluations" / str(job_id)
+        out = report_dir(params, state.settings, job_id)
         if as_json:
-            click.echo((report_dir / "report.json").read_text())
+            click.echo((out / "report.json").read_text())
         else:
-            click.echo(f"report: {report_dir / 'index.html'}")
+            click.echo(f"report: {out / 'index.html'}")

@@ -30,7 +30,7 @@ NO_WORKER_HINT_S = 15.0
 @click.option("--crop", help="Random crop HxW in pixels, e.g. 320x736.")
 @click.option("--iters", type=click.IntRange(1), help="GRU iterations in training.")
 @click.option("--devices", default="auto", show_default=True, help="auto, cpu, cuda, or cuda:0,1 (GPUs to use).")
-@click.option("--nproc", default=1, show_default=True, type=click.IntRange(1, training.MAX_PROCESSES),
+@click.option("--nproc", default=1, show_default=True, type=click.IntRange(1),
               help="Trainer processes on this machine (DDP: gloo on CPU, NCCL on CUDA).")
 @click.option("--nnodes", default=1, show_default=True, type=click.IntRange(1, 1024),
               help="Machines in the run; the others join with torchrun (see README).")
@@ -67,8 +67,7 @@ def train(state: CliState, preset: str, steps: int | None, batch: int | None, lr
     shell = run_control.ShellOptions(data_dir=data_root, data_format=data_format, init_path=init_checkpoint,
                                      nnodes=nnodes, rdzv_endpoint=rdzv_endpoint)
     with service_errors():
-        # The command line's own machine is the limit (settings=None): its user chose the worker.
-        request = validate(RunLaunch, {k: v for k, v in body.items() if v is not None})
+        request = validate(RunLaunch, {k: v for k, v in body.items() if v is not None}, state.settings)
         with transaction(rt.sessions) as s:
             run = run_control.launch_request(rt, s, request, None, shell)
             run_id, job_id = run.id, run.job_id

@@ -5,7 +5,7 @@ The run row and its train job commit together; the job reaches the ``train`` que
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -18,7 +18,7 @@ from dataset.services import jobs as job_rows
 from dataset.services.dataset_roots import folder_label, resolve_folder
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from model import launcher, registry
-from model.fit import check_fit
+from model.fit import check_fit, train_device
 from model.jobs import resolve_config
 from model.launch import FieldError, RunLaunch
 from model.presets import Config
@@ -43,7 +43,10 @@ def launch_request(rt: Runtime, session: Session, request: RunLaunch, user: User
     """A validated launch (API, form, command line): names resolved, then :func:`launch`."""
     shell = shell or ShellOptions()
     if request.data is not None:
-        folder = resolve_folder(rt.settings.dataset_roots, request.data.root, request.data.path)
+        try:
+            folder = resolve_folder(rt.settings.dataset_roots, request.data.root, request.data.path)
+        except InvalidInput as exc:
+            raise FieldError("data", str(exc)) from None
         selection = training.DataSelection(format=request.data.format, root=str(folder),
                                            label=folder_label(request.data.root, request.data.path))
     elif shell.data_dir is not None:
@@ -52,27 +55,32 @@ def launch_request(rt: Runtime, session: Session, request: RunLaunch, user: User
     else:
         selection = training.DataSelection(video_ids=tuple(request.video_ids), illusion_types=tuple(request.illusion_types),
                                            kinds=tuple(request.kinds), qa_ok=request.qa_ok)
-    init_path, init_label = (str(shell.init_path.resolve()), shell.init_path.name) if shell.init_path else (None, None)
-    if request.init is not None:
-        found = registry.pin(_named(rt, session, request.init.run, request.init.checkpoint, field="init"))
-        init_path, init_label = str(found.path), found.label
+    shell_init = (str(shell.init_path.resolve()), shell.init_path.name) if shell.init_path else (None, None)
     settings_launch = training.Launch(
-        nproc=request.nproc, devices=request.devices, init_checkpoint=init_path, init_label=init_label,
+        nproc=request.nproc, devices=request.devices, init_checkpoint=shell_init[0], init_label=shell_init[1],
         nnodes=shell.nnodes, rdzv_endpoint=shell.rdzv_endpoint, split=training.parse_split(request.split),
         seed=request.seed)
+    init = _named(rt, session, request.init.run, request.init.checkpoint, field="init") if request.init else None
     return launch(rt, session, preset=request.preset, overrides=request.overrides(), selection=selection,
-                  launch=settings_launch, user=user)
+                  launch=settings_launch, user=user, init=init)
 
 
 def launch(rt: Runtime, session: Session, *, preset: str, overrides: dict[str, Any],
-           selection: training.DataSelection, launch: training.Launch, user: User | None) -> TrainingRun:
+           selection: training.DataSelection, launch: training.Launch, user: User | None,
+           init: registry.CheckpointFile | None = None) -> TrainingRun:
     """Create the run (its dataset version pinned, checked to fit the data and the machine,
-    ``run.json`` written) and queue its job."""
+    ``run.json`` written) and queue its job. ``init``, a run's checkpoint to start from, is pinned
+    only once the launch has passed every check."""
     config = resolve_config(preset, {**overrides, "train.seed": launch.seed})
     version = training.pin_selection(session, rt.media, selection)
-    device = launch.devices if launch.devices != "auto" else rt.settings.train_devices
-    check_fit(Config.from_dict(config), nproc=launch.nproc, device=device, memory_gb=rt.settings.train_memory_gb,
-              smallest_image=training.smallest_image(session, version, selection))
+    check_fit(Config.from_dict(config), nproc=launch.nproc, device=train_device(launch.devices, rt.settings),
+              memory_gb=rt.settings.train_memory_gb, smallest_image=training.smallest_image(session, version, selection))
+    if init is not None:
+        try:
+            pinned = registry.pin(init)
+        except ValueError as exc:
+            raise FieldError("init", str(exc)) from None
+        launch = replace(launch, init_checkpoint=str(pinned.path), init_label=pinned.label)
     run = training.create_run(session, rt.media, rt.settings.runs_dir, preset=preset, config=config,
                               selection=selection, launch=launch, version=version, user=user)
     run.job_id = rt.submit(session, "train", {"run_id": run.id}, user).id
@@ -107,26 +115,28 @@ def resume(rt: Runtime, run_id: int, user: User | None) -> None:
 
 def promote(rt: Runtime, run_id: int, which: str, user: User | None, *, path: Path | None = None) -> dict[str, Any]:
     """Make the run's ``best`` or ``last`` checkpoint, or one of its files by name — or, from the
-    command line, the checkpoint file ``path`` — the current model. Refused when its weights are
-    not finite (a diverged run's)."""
+    command line, the checkpoint file ``path`` — the current model. The file checked is the file
+    promoted (``best.pt`` is frozen first); refused when its weights are not finite (a diverged run's)."""
     from model.checkpoint import load_checkpoint, weights_finite
 
     with transaction(rt.sessions) as s:
         run = training.get_run(s, run_id)
-        if path is None:
-            target: registry.CheckpointFile | Path = _checkpoint_of(rt, run, which, field="checkpoint")
-            file, label = target.path, target.label
-        else:
-            target = file = path
-            label = str(path)
+        created = False
         try:
+            if path is None:
+                target, created = registry.freeze(_checkpoint_of(rt, run, which, field="checkpoint"))
+                file, label = target.path, target.label
+            else:
+                target = file = path
+                label = str(path)
             payload = load_checkpoint(file, label=label)
         except ValueError as exc:
             raise FieldError("checkpoint", str(exc)) from None
         if not weights_finite(payload):
-            raise InvalidInput(f"{label} has non-finite weights (the run diverged); promote another checkpoint")
-        step = None if path is None else int(payload["step"])
-        doc = registry.promote(rt.settings, target, run=run.id, step=step)
+            if created:
+                file.unlink(missing_ok=True)
+            raise FieldError("checkpoint", f"{label} has non-finite weights (the run diverged); promote another one")
+        doc = registry.promote(rt.settings, target, run=run.id, step=int(payload["step"]))
         if user is not None:
             audit.record(s, user.id, "run.promote", "run", run.id, checkpoint=doc["file"], step=doc["step"])
     return doc

@@ -49,7 +49,9 @@ def login() -> ResponseReturnValue:
             minutes = plural(-(-wait // 60), "minute")
             flash(f"Too many failed logins for this name from your address: try again in {minutes}.", "error")
             return render_template("login.html", form=form), 429, {"Retry-After": str(wait)}
-        counters.slow_down(settings)
+        if (busy := counters.slow_down(settings)) is not None:
+            flash(f"Many logins are being slowed down just now: try again in {plural(busy, 'second')}.", "error")
+            return render_template("login.html", form=form), 429, {"Retry-After": str(busy)}
         user = user_service.authenticate(g.db, form.name.data, form.password.data)
         if user is not None:
             counters.succeeded()

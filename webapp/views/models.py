@@ -18,7 +18,7 @@ from model.fit import suggest_crop
 from model.presets import load_preset
 from webapp.api.blueprint import int_arg
 from webapp.auth import requires
-from webapp.redact import path_rewrites, redact
+from webapp.redact import app_rewrites, redact
 from webapp.runtime import runtime
 
 bp = Blueprint("models", __name__)
@@ -90,7 +90,7 @@ def run_log_file(run_id: int) -> ResponseReturnValue:
     directory = training.run_dir(settings.runs_dir, run_id)
     if not run_logs.rank0_files(directory):
         abort(404, f"run {run_id} has no log yet: its trainers have not started")
-    rewrites = path_rewrites(settings)
+    rewrites = app_rewrites()
     lines = (redact(line.encode(), rewrites) for line in run_logs.log_lines(directory))
     return Response(lines, mimetype="text/plain",
                     headers={"Content-Disposition": f'attachment; filename="run{run_id}_rank0.log"',
