@@ -11,7 +11,7 @@ import pytest
 
 from dataset.db import migrate
 from dataset.settings import Settings
-from tests.conftest import TEST_REDIS_URL, login, make_settings
+from tests.conftest import PASSWORD, TEST_REDIS_URL, csrf_from, login, make_settings
 
 
 @pytest.fixture(params=["sqlite", "redis"])
@@ -124,3 +124,31 @@ def test_a_client_throttled_on_the_api_gets_a_429_page_not_a_500(app) -> None:  
     for path in ("/login", "/"):  # the error page asks who is logged in: it must not throttle again
         response = client.get(path, headers=bearer("ist_guess"))
         assert response.status_code == 429 and "<h1>429</h1>" in response.get_data(as_text=True)
+
+
+def test_slowed_logins_cannot_hold_every_server_thread(app, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """Two slowed logins wait at a time; a third is told to come back, with no wait and no password check."""
+    from webapp import throttle
+
+    monkeypatch.setattr(throttle.LoginCounters, "wait_s", lambda self, settings: 3.0)
+    holders = [throttle._SLOWED.acquire(blocking=False) for _ in range(throttle.SLOWED_AT_ONCE)]
+    try:
+        assert all(holders)
+        answer = login(from_address(app, "203.0.113.9"), "admin")
+        assert answer.status_code == 429 and answer.headers["Retry-After"] == "3"
+        assert "try again in 3 seconds" in answer.get_data(as_text=True)
+    finally:
+        for _ in holders:
+            throttle._SLOWED.release()
+
+
+def test_a_new_login_ends_the_browsers_old_session_on_the_server(app) -> None:  # type: ignore[no-untyped-def]
+    first = app.test_client()
+    assert login(first, "curator").status_code == 302
+    copied = app.test_client()  # someone copied the first session's cookie
+    copied.set_cookie("session", first.get_cookie("session").value)
+    assert copied.get("/api/v1/me").status_code == 200
+    token = csrf_from(first.get("/").get_data(as_text=True))  # logged in, /login redirects: post to it
+    again = first.post("/login", data={"name": "annotator", "password": PASSWORD, "csrf_token": token})
+    assert again.status_code == 302 and first.get("/api/v1/me").json["name"] == "annotator"
+    assert copied.get("/api/v1/me").status_code == 401

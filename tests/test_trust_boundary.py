@@ -329,3 +329,48 @@ def test_the_train_worker_checks_the_run_against_its_own_machine(client, tokens,
     assert shown["state"] == "failed" and "does not fit train worker" in shown["reason"]
     assert "nproc: 2 processes, and this train worker allows 1" in shown["reason"]
     assert not (training.run_dir(runtime.settings.runs_dir, run.json["run"]) / "progress.jsonl").exists()
+
+
+def test_best_pt_by_name_pins_the_step_the_file_holds(client, tokens, runtime, samples) -> None:  # type: ignore[no-untyped-def]
+    run_id = _queued_run(runtime)
+    folder = training.run_dir(runtime.settings.runs_dir, run_id) / "checkpoints"
+    write_checkpoint(folder / "best.pt", 6)  # the database has not heard of this validation yet
+    with transaction(runtime.sessions) as s:
+        s.get(TrainingRun, run_id).best_step = 4
+    admin = bearer(tokens, "admin")
+    promoted = client.post(f"/api/v1/runs/{run_id}/promote", json={"checkpoint": "best.pt"}, headers=admin)
+    assert promoted.status_code == 200, promoted.json
+    assert promoted.json == {"run": run_id, "file": "best_step_0000006.pt", "step": 6, "best": True}
+    evaluation = client.post("/api/v1/evaluations", headers=bearer(tokens, "curator"), json={
+        "methods": ["fusion"], "checkpoint": {"run": run_id, "checkpoint": "best.pt"}})
+    assert evaluation.status_code == 202 and evaluation.json["step"] == 6
+
+
+def test_a_refused_launch_leaves_no_pin(client, tokens, runtime, samples) -> None:  # type: ignore[no-untyped-def]
+    run_id = _queued_run(runtime)
+    folder = training.run_dir(runtime.settings.runs_dir, run_id) / "checkpoints"
+    write_checkpoint(folder / "best.pt", 4)
+    with transaction(runtime.sessions) as s:
+        s.get(TrainingRun, run_id).best_step = 4
+    refused = client.post("/api/v1/runs", headers=bearer(tokens, "admin"),
+                          json={**SHORT, "crop": "4000x8000", "init": {"run": run_id, "checkpoint": "best"}})
+    assert refused.status_code == 400 and refused.json["field"] == "crop"
+    odd = client.post("/api/v1/runs", json={**SHORT, "batch": 3, "nproc": 2}, headers=bearer(tokens, "admin"))
+    assert odd.status_code == 400 and odd.json["field"] == "batch" and "divide" in odd.json["error"]
+    evaluation = client.post("/api/v1/evaluations", headers=bearer(tokens, "curator"), json={
+        "methods": ["fusion"], "checkpoint": {"run": run_id, "checkpoint": "best"},
+        "data": {"root": "data", "path": "missing", "format": "kitti"}})
+    assert evaluation.status_code == 400 and evaluation.json["field"] == "data"
+    assert not (folder / "best_step_0000004.pt").exists() and not (folder.parent / "keep.json").exists()
+
+
+def test_evaluate_with_a_runs_checkpoint_file_evaluates_that_runs_test_split(runtime, samples) -> None:  # type: ignore[no-untyped-def]
+    run_id = _queued_run(runtime)
+    path = training.run_dir(runtime.settings.runs_dir, run_id) / "checkpoints" / "step_0000002.pt"
+    write_checkpoint(path, 2)
+    result = CliRunner().invoke(main, ["--data-dir", str(runtime.settings.home), "evaluate", "--method", "fusion",
+                                       "--checkpoint", str(path)])
+    assert result.exit_code == 0, result.output
+    with runtime.sessions() as s:
+        job = s.query(Job).filter(Job.kind == "evaluate").one()
+        assert job.params["run"] == run_id and job.params["checkpoint"] == {"path": str(path), "run": run_id}
