@@ -12,17 +12,23 @@ from __future__ import annotations
 
 import io
 import pickle
+import zipfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
+from numpy._core import multiarray as numpy_multiarray
 
 from dataset.atomic import atomic_write_bytes
 from model.network import FusionNetwork
 from model.presets import Config
 
 FORMAT = "illusion-studio-fusion/1"
+# What checkpoints of earlier releases hold beyond tensors: numpy's RNG state (an array and scalars).
+_NUMPY_GLOBALS = [np.dtype, np.ndarray, numpy_multiarray._reconstruct, numpy_multiarray.scalar,
+                  *(type(np.dtype(t)) for t in (np.uint8, np.int32, np.int64, np.uint32, np.float32, np.float64,
+                                                np.bool_))]
 UPGRADE_HINT = "illusion-studio checkpoints upgrade [PATH | --all]"
 
 
@@ -50,6 +56,8 @@ def load_checkpoint(path: Path, map_location: str = "cpu", *, label: str | None 
     path, label = Path(path), label or str(path)
     if not path.is_file():
         raise ValueError(f"checkpoint {label} does not exist")
+    if not zipfile.is_zipfile(path):  # torch.save has written zip archives since torch 1.6
+        raise ValueError(f"{label} is not a readable checkpoint")
     try:
         payload = torch.load(path, map_location=map_location, weights_only=True)
     except pickle.UnpicklingError:
@@ -107,15 +115,20 @@ def plain_value(value: Any) -> Any:
 
 def upgrade_checkpoint(path: Path) -> bool:
     """Rewrite an older checkpoint at ``path`` (atomically) so that it loads with ``weights_only``;
-    False when it already does. CLI only: this unpickles the file, so only its owner, from a
-    shell, may point it at one. ValueError when the file is not an Illusion Studio checkpoint."""
+    False when it already does. The older file is read weights-only too, with numpy's array and
+    scalar reconstruction allowed (what its RNG state needs) and nothing else, so even a planted
+    pickle runs no code here. ValueError naming the file when it is not such a checkpoint."""
     path = Path(path)
     try:
         load_checkpoint(path)
         return False
     except UnsafeCheckpoint:
         pass
-    payload = torch.load(path, map_location="cpu", weights_only=False)
+    try:
+        with torch.serialization.safe_globals(_NUMPY_GLOBALS):
+            payload = torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError:
+        raise ValueError(f"{path} holds objects beyond numpy arrays: not a checkpoint of an earlier release") from None
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
         raise ValueError(f"{path} is not an Illusion Studio fusion-model checkpoint")
     buffer = io.BytesIO()

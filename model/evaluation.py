@@ -23,7 +23,7 @@ from dataset.services.jobs import JobContext
 from model import registry
 from model.evaluate import DEFAULT_THRESHOLDS, RESOLUTIONS, EvalOptions, evaluate, iter_reader
 from model.launch import EvaluationLaunch, FieldError, FolderRef
-from model.methods import NETWORK_METHODS, Mono, NetworkRuns, SgbmParams, build_methods
+from model.methods import NETWORK_METHODS, Mono, NetworkRuns, SgbmParams, build_methods, relative_pfm
 from model.report import PredictionWriter, ranked_samples, write_pictures, write_report
 
 DEFAULT_METHODS = ("fusion", "stereo", "mono_gt_align", "sgbm")
@@ -253,7 +253,7 @@ class SeenSamples:
 
 def prediction_rel_path(sample: StereoSample) -> str:
     """Where :class:`PredictionWriter` puts a sample's prediction under ``predictions/<method>/``."""
-    return str(Path(str(sample.meta.get("left") or sample.name)).with_suffix(".pfm"))
+    return str(relative_pfm(sample))
 
 
 def _pictures(out: Path, reader: Any, report: dict[str, Any], writer: PredictionWriter) -> dict[str, list[str]]:

@@ -51,7 +51,8 @@ def fusion_loss(out: FusionOutput, gt: Tensor, valid: Tensor, cfg: TrainConfig, 
                 valid_total: Tensor | None = None) -> tuple[Tensor, dict[str, float]]:
     """(scalar loss, parts) for ``gt`` B×1×H×W pixels and ``valid`` bool B×1×H×W. Parts:
     "stereo", "mono_aligned", "final", "confidence" (each already weighted), "total", "epe"
-    (of the final disparity, over this batch's valid pixels), "valid" (this batch's count)."""
+    (of the final disparity, over this batch's valid pixels), "valid" (this batch's count). A stereo-only
+    output (model.use_mono off) is trained on its iterates alone: the other terms are 0."""
     if gt.shape != out.disparity.shape or valid.shape != gt.shape:
         raise ValueError(f"gt and valid must be {tuple(out.disparity.shape)}, got {tuple(gt.shape)}, {tuple(valid.shape)}")
     mask = valid.bool() & torch.isfinite(gt) & (gt < cfg.max_disparity)
@@ -67,14 +68,17 @@ def fusion_loss(out: FusionOutput, gt: Tensor, valid: Tensor, cfg: TrainConfig, 
     steps = len(iterates)
     gamma = sequence_gamma(cfg.loss_gamma, steps)
     stereo = sum(gamma ** (steps + 2 - t) * l1(pred) for t, pred in enumerate(iterates, start=1))
-    mono = gamma * l1(out.mono_aligned)
-    final = l1(out.disparity)
-    size = out.confidence_logits.shape[2:]
-    error = (gt - out.stereo.detach()).abs()
-    target, valid_low = confidence_target(error, mask, size)
-    area = (size[0] * size[1]) / (gt.shape[2] * gt.shape[3])
-    terms = focal_terms(out.confidence_logits, target, cfg.focal_alpha, cfg.focal_gamma)
-    confidence = cfg.focal_weight * (terms * valid_low).sum() / (total * area)
+    if out.stereo_only:  # RAFT-Stereo's sequence loss alone: nothing else is predicted
+        mono = final = confidence = torch.zeros((), dtype=gt.dtype, device=gt.device)
+    else:
+        mono = gamma * l1(out.mono_aligned)
+        final = l1(out.disparity)
+        size = out.confidence_logits.shape[2:]
+        error = (gt - out.stereo.detach()).abs()
+        target, valid_low = confidence_target(error, mask, size)
+        area = (size[0] * size[1]) / (gt.shape[2] * gt.shape[3])
+        terms = focal_terms(out.confidence_logits, target, cfg.focal_alpha, cfg.focal_gamma)
+        confidence = cfg.focal_weight * (terms * valid_low).sum() / (total * area)
     loss = stereo + mono + final + confidence
     with torch.no_grad():
         epe = ((out.disparity - gt).abs() * maskf).sum() / count.clamp_min(1)

@@ -91,10 +91,16 @@ class Mono:
 
 def prediction_path(directory: Path, sample: StereoSample) -> Path:
     """``DIR/REL/x.pfm`` for the sample whose left image is ``REL/x.png`` in its dataset."""
+    return directory / relative_pfm(sample)
+
+
+def relative_pfm(sample: StereoSample) -> Path:
+    """``REL/x.pfm`` for the sample whose left image is ``REL/x.png`` in its dataset: where its
+    prediction lies in a predictions folder. SampleError when that would leave the folder."""
     rel = Path(str(sample.meta.get("left") or sample.name))
     if rel.is_absolute() or ".." in rel.parts:
         raise SampleError(f"sample path {rel} is not relative to the dataset")
-    return directory / rel.with_suffix(".pfm")
+    return rel.with_suffix(".pfm")
 
 
 class NetworkRuns:

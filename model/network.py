@@ -32,6 +32,9 @@ class FusionOutput:
     confidence: Tensor  # B×1×h×w in (0, 1) at the stereo working resolution
     confidence_logits: Tensor  # same shape, pre-sigmoid
     mono: Tensor  # B×1×H×W, the relative mono disparity used (given or estimated)
+    # A stereo-only network's (model.use_mono off): disparity is the stereo branch's, fully trusted
+    # (confidence 1, logits +inf), no aligned mono (zeros); the loss is the iterates' alone.
+    stereo_only: bool = False
 
 
 class FusionNetwork(nn.Module):
@@ -46,8 +49,9 @@ class FusionNetwork(nn.Module):
         self.stereo_branch = StereoBranch(config, self.mono.feature_channels)
         self.vlm = make_vlm(config) if config.use_vlm else None
         condition_dim = self.vlm.dim if self.vlm is not None else 0
-        self.confidence = ConfidenceHead(config, condition_dim)
-        self.fusion = GlobalFusion(config, config.hidden_dims[0])
+        # Built only where they are used: DDP requires every parameter to get a gradient.
+        self.confidence = ConfidenceHead(config, condition_dim) if config.use_mono else None
+        self.fusion = GlobalFusion(config, config.hidden_dims[0]) if config.use_mono else None
         self.size_multiple = config.size_multiple
         self._hashes: dict[str, str] | None = None
 
@@ -60,10 +64,15 @@ class FusionNetwork(nn.Module):
         self._check(left, right, mono)
         all_iterates = self.training if all_iterates is None else all_iterates
         left_n, right_n = 2 * (left / 255.0) - 1, 2 * (right / 255.0) - 1
-        mono_result = self.mono(left_n, mono)
+        # Stereo only: the context encoder sees the left image beside a constant, never the mono input.
+        mono_result = self.mono(left_n, mono if self.config.use_mono else torch.zeros_like(left[:, :1]))
         mono_full = normalize_mono(mono_result.disparity)
         mono_low = F.avg_pool2d(mono_full, self.factor)
         stereo = self.stereo_branch(left_n, right_n, mono_result.features, iters=iters, all_iterates=all_iterates)
+        if self.confidence is None or self.fusion is None:
+            last, low = stereo.iterates[-1], stereo.iterates_low[-1]
+            return FusionOutput(last, stereo.iterates, last, torch.zeros_like(last), torch.ones_like(low),
+                                torch.full_like(low, torch.inf), mono_result.disparity, stereo_only=True)
         disparity_low = stereo.iterates_low[-1]
         cost = stereo.corr.lookup(disparity_low.detach())
         if self.vlm is not None:

@@ -55,6 +55,9 @@ class ModelConfig:
     vlm_depth: int = 2
     vlm_patch: int = 32  # lite encoder patch side, pixels
     use_vlm: bool = True  # False: confidence from image features alone (the paper's PF ablation)
+    # False: a stereo-only network (`bench fusion --ablations`' stereo_only): the stereo branch alone,
+    # its context encoder fed a constant for the mono input; no confidence or fusion; the output is its last iterate.
+    use_mono: bool = True
     flow_steps: int = 2  # K Euler steps
     flow_dim: int = 64
     flow_latent: int = 8  # channels of the flow's state y per token
@@ -85,6 +88,9 @@ class ModelConfig:
             raise ValueError("model.encoder_blocks: the two strided stages need at least one block each")
         if self.token_downsample < self.n_downsample:
             raise ValueError("model.token_downsample must be at least model.n_downsample")
+        if not self.use_mono and (self.use_vlm or self.mono_backend != "precomputed"):
+            raise ValueError("model.use_mono = false (stereo only) needs model.use_vlm = false and "
+                             "model.mono_backend = 'precomputed' (the context encoder that is fed no mono)")
         if self.max_inference_pixels < 0:
             raise ValueError("model.max_inference_pixels must be >= 0 (0: full resolution)")
         if self.fusion_pool_kernel % 2 == 0:

@@ -106,6 +106,8 @@ def freeze(checkpoint: CheckpointFile) -> tuple[CheckpointFile, bool]:
             atomic_write_bytes(pending, checkpoint.path.read_bytes())
         step = int(load_checkpoint(pending, label=checkpoint.label)["step"])
         frozen = pending.with_name(f"best_step_{step:07d}.pt")
+        if frozen.is_symlink():
+            raise ValueError(f"run {checkpoint.run}'s {frozen.name} is a symbolic link, not the run's own file")
         created = not frozen.exists()
         if created:
             os.replace(pending, frozen)

@@ -20,6 +20,7 @@ from dataset.atomic import atomic_write_bytes
 from dataset.formats import encode_pfm, write_kitti_disparity, write_png
 from dataset.preview.images import colorize, colorize_error, value_range
 from dataset.readers import StereoSample
+from model.methods import prediction_path
 
 TABLE_METRICS = ("epe", "bad1", "bad2", "bad3", "bad5")
 DEPTH_METRICS = ("abs_rel", "rmse", "log10", "delta1", "delta2", "delta3")
@@ -43,8 +44,7 @@ class PredictionWriter:
         label = sample_label(sample.meta)
         if label:
             self.labels[sample.name] = label
-        rel = Path(str(sample.meta.get("left") or sample.name)).with_suffix(".pfm")
-        path = self.out_dir / "predictions" / method / rel
+        path = prediction_path(self.out_dir / "predictions" / method, sample)
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_bytes(path, encode_pfm(np.asarray(pred, np.float32)))
         if self.kitti_png:

@@ -58,8 +58,11 @@ class WritesAFile:
 
 
 def plant_pickle(path: Path, proof: Path) -> None:
+    """A malicious checkpoint as torch writes one (a zip whose pickle runs ``touch``) at ``path``."""
+    import torch
+
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(pickle.dumps({"format": FORMAT, "step": 1, "state": WritesAFile(proof)}))
+    torch.save({"format": FORMAT, "step": 1, "state": WritesAFile(proof)}, path)
 
 
 # ---- never unpickle --------------------------------------------------------------------------------
@@ -111,6 +114,23 @@ def test_an_older_checkpoint_names_the_upgrade_command_which_converts_it(runtime
     keys = payload["extra"]["rng"][0]["numpy"][1]
     assert isinstance(keys, torch.Tensor) and keys.dtype == torch.uint32 and payload["step"] == 3
     assert upgrade_checkpoint(old) is False  # idempotent
+
+
+def test_upgrade_reads_old_checkpoints_without_running_a_planted_pickle(runtime, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    proof = tmp_path / "pwned"
+    checkpoints = runtime.settings.runs_dir / "1" / "checkpoints"
+    plant_pickle(checkpoints / "step_0000001.pt", proof)
+    (tmp_path / "elsewhere").mkdir()
+    plant_pickle(tmp_path / "elsewhere" / "step_0000002.pt", proof)
+    (runtime.settings.runs_dir / "2").mkdir()
+    (runtime.settings.runs_dir / "2" / "checkpoints").symlink_to(tmp_path / "elsewhere")  # never followed
+    junk = tmp_path / "junk.pt"
+    junk.write_bytes(pickle.dumps({"format": FORMAT}))  # a bare pickle, not torch's zip
+    with pytest.raises(ValueError, match="not a readable checkpoint"):
+        load_checkpoint(junk)
+    result = CliRunner().invoke(main, ["--data-dir", str(runtime.settings.home), "checkpoints", "upgrade", "--all"])
+    assert result.exit_code == 1 and "1 of 1 checkpoint(s) could not be upgraded" in result.output, result.output
+    assert "step_0000002" not in result.output and not proof.exists()
 
 
 def test_upgrade_all_rewrites_every_runs_checkpoint(runtime, tmp_path) -> None:  # type: ignore[no-untyped-def]
@@ -374,3 +394,58 @@ def test_evaluate_with_a_runs_checkpoint_file_evaluates_that_runs_test_split(run
     with runtime.sessions() as s:
         job = s.query(Job).filter(Job.kind == "evaluate").one()
         assert job.params["run"] == run_id and job.params["checkpoint"] == {"path": str(path), "run": run_id}
+
+
+def test_planted_links_and_odd_ids_are_404_or_ignored(client, tokens, runtime, samples, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """A run's linked checkpoints or val folder, a linked best_step file, Unicode digits in ids."""
+    run_id = _queued_run(runtime)
+    directory = training.run_dir(runtime.settings.runs_dir, run_id)
+    outside = tmp_path / "outside"
+    write_checkpoint(outside / "step_0000001.pt", 1)
+    (outside / "secret.png").write_bytes(b"\x89PNG secret")
+    (directory / "checkpoints").symlink_to(outside)
+    (directory / "val").symlink_to(outside)
+    curator, admin = bearer(tokens, "curator"), bearer(tokens, "admin")
+    assert client.get(f"/api/v1/runs/{run_id}/checkpoints/step_0000001.pt", headers=curator).status_code == 404
+    assert client.get(f"/api/v1/runs/{run_id}", headers=curator).json["checkpoints"] == []
+    assert client.get(f"/models/runs/{run_id}/files/val/secret.png", headers=curator).status_code == 404
+    (directory / "checkpoints").unlink()
+    write_checkpoint(directory / "checkpoints" / "best.pt", 7)
+    (directory / "checkpoints" / "best_step_0000007.pt").symlink_to(outside / "step_0000001.pt")
+    with transaction(runtime.sessions) as s:
+        s.get(TrainingRun, run_id).best_step = 7
+    promoted = client.post(f"/api/v1/runs/{run_id}/promote", json={"checkpoint": "best"}, headers=admin)
+    assert promoted.status_code == 400 and "symbolic link" in promoted.json["error"]
+    assert client.post(f"/api/v1/runs/{run_id}/promote", json={"checkpoint": "best", "x": 1},
+                       headers=admin).json["field"] == "x"
+    for ids in ("99999999999999999999", "%C2%B2", "%D9%A1"):
+        listed = client.get(f"/api/v1/runs?ids={ids}", headers=curator)
+        assert listed.status_code == 200 and listed.json["items"] == [], ids
+        assert client.get(f"/models/compare?ids={ids},1", headers=curator).status_code == 200
+    assert client.get(f"/api/v1/runs/%EF%BC%92{run_id}", headers=curator).status_code == 404
+
+
+def test_a_manifest_cannot_name_files_outside_its_dataset(client, tokens, runtime, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from dataset.export.errors import LayoutError
+    from dataset.export.manifest import manifest_file
+
+    root = tmp_path / "roots" / "data" / "nat"
+    root.mkdir()
+    (tmp_path / "victim.png").write_bytes(b"x")
+    for relative in ("/etc/passwd", "../../../victim.png", "a/../../x"):
+        with pytest.raises(LayoutError, match="leaves the dataset folder"):
+            manifest_file(root, relative, "left")
+    (root / "link.png").symlink_to(tmp_path / "victim.png")
+    with pytest.raises(LayoutError, match="leaves the dataset folder"):
+        manifest_file(root, "link.png", "left")
+
+
+def test_command_line_paths_and_reports_show_no_server_path(client, tokens, runtime, samples, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    outside = tmp_path / "elsewhere" / "kitti"
+    outside.mkdir(parents=True)
+    with transaction(runtime.sessions) as s:  # a command-line evaluation of a folder outside every root
+        job = job_service.create_job(s, "evaluate", {"data": {"dir": str(outside)}, "format": "kitti"}, None)
+        job.error = f"LayoutError: {outside}: not a KITTI folder"
+        job_id = job.id
+    shown = client.get(f"/api/v1/jobs/{job_id}", headers=bearer(tokens, "curator")).get_data(as_text=True)
+    assert str(tmp_path) not in shown and "…/kitti" in shown

@@ -55,6 +55,7 @@ def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
         SESSION_COOKIE_SAMESITE="Lax",
         SESSION_COOKIE_SECURE=settings.https,
     )
+    app.url_map.converters["int"] = AsciiIntegerConverter
     app.json = FiniteJSONProvider(app)
     app.json.sort_keys = False  # type: ignore[attr-defined]
     # Before any route is added: ids beyond what the database stores are a 404, not a crash.
@@ -82,7 +83,6 @@ def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
 
     init_throttle(app, settings)
     init_headers(app, settings)
-    init_redaction(app, settings)
     init_auth(app)
 
     from webapp.api import api
@@ -91,8 +91,15 @@ def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
     for blueprint in BLUEPRINTS:
         app.register_blueprint(blueprint)
     app.register_blueprint(api, url_prefix="/api/v1")
+    init_redaction(app, settings)
     _register_errors(app)
     return app
+
+
+class AsciiIntegerConverter(IntegerConverter):
+    """``<int:…>`` in URLs: ASCII digits only (werkzeug's ``\\d`` also takes ``２`` or ``١`` as 2 and 1)."""
+
+    regex = r"[0-9]+"
 
 
 def request_body_limit(settings: Settings) -> int:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import enum
 import json
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 from typing import Any
 
 from dataset.export.errors import LayoutError
@@ -95,3 +95,15 @@ def _member(path: Path, where: str, value: str, kind: type[enum.StrEnum]) -> Non
 
 def _type_name(kind: type | tuple[type, ...]) -> str:
     return "number" if isinstance(kind, tuple) else {dict: "object", list: "list", str: "string"}.get(kind, kind.__name__)
+
+
+def manifest_file(root: Path, relative: str, what: str) -> Path:
+    """``root/relative``, a file a manifest names: it must exist and stay inside ``root`` — no
+    absolute path, no ``..``, no symbolic link out (a dataset from elsewhere could name any file)."""
+    path = root / relative
+    if PurePosixPath(relative).is_absolute() or ".." in PurePosixPath(relative).parts \
+            or not path.resolve().is_relative_to(root.resolve()):
+        raise LayoutError(f"{root / MANIFEST}: {what}: path {relative!r} leaves the dataset folder")
+    if not path.is_file():
+        raise LayoutError(f"{path}: missing, but {MANIFEST} names it ({what})")
+    return path

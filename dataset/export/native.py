@@ -15,7 +15,16 @@ from typing import Any
 
 from dataset.export.coco import coco_document
 from dataset.export.errors import LayoutError
-from dataset.export.manifest import FORMAT, FORMAT_VERSION, MANIFEST, created_by, dump_json, read_json, read_manifest
+from dataset.export.manifest import (
+    FORMAT,
+    FORMAT_VERSION,
+    MANIFEST,
+    created_by,
+    dump_json,
+    manifest_file,
+    read_json,
+    read_manifest,
+)
 from dataset.export.probe import check_shape, raster_shape
 from dataset.export.records import PendingSample, Progress, SampleRecord, VideoInfo
 from dataset.export.splits import split_of
@@ -87,7 +96,7 @@ def read_native(root: Path, progress: Progress) -> list[PendingSample]:
     root = Path(root).absolute()
     manifest = read_manifest(root)
     for split in manifest["splits"]:
-        read_json(_inside(root, split["annotations"], "annotations"), f"COCO annotations of split {split['name']}")
+        read_json(manifest_file(root, split["annotations"], "annotations"), f"COCO annotations of split {split['name']}")
     pending = []
     samples = manifest["samples"]
     for done, entry in enumerate(samples, start=1):
@@ -115,21 +124,11 @@ def _sample_paths(root: Path, entry: dict[str, Any]) -> dict[str, Any]:
 def _check_file(root: Path, sample: str, name: str, spec: Any, frame: dict[str, Any], channels: int) -> Path:
     if not (isinstance(spec, dict) and isinstance(spec.get("path"), str) and isinstance(spec.get("sha256"), str)):
         raise LayoutError(f"{root / MANIFEST}: sample {sample}: {name} needs 'path' and 'sha256'")
-    path = _inside(root, spec["path"], f"{name} of sample {sample}")
+    path = manifest_file(root, spec["path"], f"{name} of sample {sample}")
     data = path.read_bytes()
     if hashlib.sha256(data).hexdigest() != spec["sha256"]:
         raise LayoutError(f"{path}: content does not match its SHA-256 in {MANIFEST} (changed or corrupt)")
     check_shape(path, raster_shape(data, path), frame["height"], frame["width"], channels)
-    return path
-
-
-def _inside(root: Path, relative: str, what: str) -> Path:
-    """``root/relative``, which must exist and stay inside ``root``."""
-    path = root / relative
-    if PurePosixPath(relative).is_absolute() or ".." in PurePosixPath(relative).parts:
-        raise LayoutError(f"{root / MANIFEST}: {what}: path {relative!r} leaves the dataset folder")
-    if not path.is_file():
-        raise LayoutError(f"{path}: missing, but {MANIFEST} names it ({what})")
     return path
 
 

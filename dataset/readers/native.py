@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from dataset.export.errors import LayoutError
-from dataset.export.manifest import read_manifest
+from dataset.export.manifest import manifest_file, read_manifest
 from dataset.formats import read_mask, read_pfm, read_rgb
 from dataset.readers.base import Camera, ListedReader, StereoSample, invalidate, make_regions
 
@@ -58,7 +58,7 @@ class NativeReader(ListedReader):
         )
 
     def _path(self, spec: dict[str, str]) -> Path:
-        return self.root / spec["path"]
+        return manifest_file(self.root, spec["path"], "a sample's file")
 
 
 def pair_types(illusion: Iterable[str], illusion_type: str | None,

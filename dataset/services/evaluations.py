@@ -13,6 +13,7 @@ from typing import Any
 from sqlalchemy import delete, func, select
 from sqlalchemy.orm import Session
 
+from dataset.contained import contained_file
 from dataset.models import Evaluation, EvaluationResult, Frame, Sample, User, Video
 from dataset.services.dataset_roots import folder_label
 from dataset.services.errors import InvalidInput, NotFound
@@ -126,9 +127,8 @@ def report_file(evaluation: Evaluation, name: str) -> Path:
     """A file of the evaluation's report folder by its relative path; never a path outside it."""
     if not evaluation.report_dir:
         raise NotFound(f"evaluation {evaluation.id} has no report yet")
-    root = Path(evaluation.report_dir).resolve()
-    path = (root / name).resolve()
-    if not path.is_relative_to(root) or not path.is_file():
+    path = contained_file(Path(evaluation.report_dir), name)
+    if path is None:
         raise NotFound(f"evaluation {evaluation.id} has no report file {name!r}")
     return path
 

@@ -297,6 +297,8 @@ def checkpoint_files(directory: Path) -> list[dict[str, Any]]:
     ``best.pt``, whose step is the run's ``best_step``), bytes and path (never for answers).
     Symbolic links and files of other names are not the run's checkpoints."""
     folder = directory / "checkpoints"
+    if directory.is_symlink() or folder.is_symlink():  # a planted link could point anywhere
+        return []
     found = []
     for path in folder.iterdir() if folder.is_dir() else []:
         match = _CHECKPOINT.match(path.name)
@@ -354,8 +356,9 @@ def recent_runs(session: Session, limit: int) -> list[tuple[int, int | None]]:
 
 
 def list_runs(session: Session, run_ids: Sequence[int] | None = None) -> list[TrainingRun]:
+    """Runs newest first: all of them, or those of ``run_ids`` (none for an empty list)."""
     query = select(TrainingRun).order_by(TrainingRun.id.desc())
-    if run_ids:
+    if run_ids is not None:
         query = query.where(TrainingRun.id.in_(list(run_ids)))
     return list(session.scalars(query))
 

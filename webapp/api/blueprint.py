@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from typing import Any, TypeVar
 
 from flask import Blueprint, g, request
@@ -12,6 +13,7 @@ from dataset.services.errors import InvalidInput, NotFound
 from dataset.services.validate import DB_INT_MAX
 
 api = Blueprint("api", __name__)
+_ID = re.compile(r"[0-9]{1,10}")
 T = TypeVar("T")
 
 
@@ -52,6 +54,13 @@ def int_arg(name: str, default: int | None = None, *, minimum: int = -DB_INT_MAX
     if not minimum <= value <= maximum:
         raise InvalidInput(f"query parameter {name!r} must be in {minimum}..{maximum}")
     return value
+
+
+def id_list_arg(name: str) -> list[int]:
+    """Query parameter ``name`` as comma-separated ids (``?ids=1,2``): ASCII digits within the
+    database's range only; anything else is left out, as an id no row has would be."""
+    values = (v.strip() for v in request.args.get(name, "").split(","))
+    return [int(v) for v in values if _ID.fullmatch(v) and int(v) <= DB_INT_MAX]
 
 
 def cursor_args() -> dict[str, str | None]:

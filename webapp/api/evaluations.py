@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from flask import g, send_file
+from flask import Response, g, send_file
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
@@ -14,6 +14,7 @@ from model.evaluation import evaluation_params
 from model.launch import EvaluationLaunch, validate
 from webapp.api.blueprint import api, json_body
 from webapp.auth import requires
+from webapp.redact import app_redactor
 from webapp.runtime import runtime
 
 
@@ -47,4 +48,9 @@ def launch_evaluation() -> ResponseReturnValue:
 def evaluation_file(evaluation_id: int, name: str) -> ResponseReturnValue:
     """A file of the report folder (report.json, per_sample.csv, pictures, predictions) by relative path."""
     path: Path = evaluations.report_file(evaluations.get_evaluation(g.db, evaluation_id), name)
+    if path.suffix in _TEXT:  # written by a job, which may quote server paths (a sample's failure)
+        return Response(app_redactor()(path.read_bytes()), mimetype=_TEXT[path.suffix])
     return send_file(path, max_age=0, conditional=True)
+
+
+_TEXT = {".json": "application/json", ".html": "text/html", ".csv": "text/csv", ".txt": "text/plain"}

@@ -13,7 +13,7 @@ from dataset.models import Role, User
 from dataset.services import training
 from model import registry
 from model.launch import FieldError, RunLaunch, validate
-from webapp.api.blueprint import api, int_arg, json_body
+from webapp.api.blueprint import api, id_list_arg, int_arg, json_body
 from webapp.auth import requires
 from webapp.jobs import runs as run_control
 from webapp.runtime import runtime
@@ -34,9 +34,9 @@ def _user() -> User | None:
 def list_runs() -> ResponseReturnValue:
     rt = runtime()
     current = registry.current_model(rt.settings)
-    ids = [int(v) for v in request.args.get("ids", "").split(",") if v.strip().isdigit()]
-    return {"items": [training.run_json(r, rt.settings.runs_dir, current=current)
-                      for r in training.list_runs(g.db, ids or None)], "current": current}
+    # ?ids= picks runs (the compare page); ids that name no run pick none, never all.
+    rows = training.list_runs(g.db, id_list_arg("ids")) if "ids" in request.args else training.list_runs(g.db)
+    return {"items": [training.run_json(r, rt.settings.runs_dir, current=current) for r in rows], "current": current}
 
 
 @api.post("/runs")
@@ -82,8 +82,10 @@ def resume_run(run_id: int) -> ResponseReturnValue:
 @requires(Role.admin)
 def promote_run(run_id: int) -> ResponseReturnValue:
     """Body ``{"checkpoint": "best" | "last" | a file name from the run's checkpoints}`` (default best)."""
-    body = request.get_data() and json_body()
-    which = (body or {}).get("checkpoint", "best")
+    body = (request.get_data() and json_body()) or {}
+    if unknown := sorted(set(body) - {"checkpoint"}):
+        raise FieldError(unknown[0], "not a field of a promote; send {\"checkpoint\": …} only")
+    which = body.get("checkpoint", "best")
     if not isinstance(which, str):
         raise FieldError("checkpoint", "expected best, last or a file name of the run's checkpoints")
     return run_control.promote(runtime(), run_id, which, _user())

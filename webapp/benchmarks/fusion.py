@@ -8,10 +8,14 @@ generated samples never do: their right views are warped from the rectified disp
 other seeds, never seen in training or validation, rendered with a baseline that brings their
 disparities into the training range, with their realistic monocular disparity (relative, coarse,
 fooled by pictures and partly by mirrors: ``dataset.synthetic.mono``) as the monocular input.
-Every method is scored densely over the same valid pixels. ``run_mono_bench`` scores mono-gt-align
-alone, without training: the figure the monocular model was calibrated on.
+Validation pairs of their own seeds (``split="val"``), rendered alike, are what the model's decisions
+are made on, so that the test pairs are scored once. Every method is scored densely over the same
+valid pixels. ``ablations`` trains, per seed, the no-VLM and stereo-only networks beside fusion
+(ABLATIONS). ``run_mono_bench`` scores mono-gt-align alone, without training: the figure the
+monocular model was calibrated on.
 
-Preparing the data is cached in the work folder and timed apart from training.
+Preparing the data is cached in the work folder; preparing, rendering the held-out pairs, each
+network's training and each scoring are timed apart.
 """
 
 from __future__ import annotations
@@ -19,6 +23,8 @@ from __future__ import annotations
 import json
 import statistics
 import time
+from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -42,7 +48,7 @@ from dataset.synthetic import render_video, write_synthetic_dataset
 from dataset.synthetic.io import FORMAT as SYNTHETIC_FORMAT
 from dataset.synthetic.layout import BASELINE_M
 from model.evaluate import EvalOptions, evaluate
-from model.methods import build_methods
+from model.methods import Predict, build_methods
 from webapp.cli.workspace import init_workspace
 from webapp.jobs import runs as run_control
 from webapp.jobs.handlers import HANDLERS
@@ -52,37 +58,77 @@ SIZE = (320, 192)  # W x H of every rendered frame
 FRAMES = 6  # per video
 GENERATED_VIDEOS = 6  # seeds 0..5 through the pipeline
 RENDERED_SEEDS = tuple(range(40, 46))  # imported as captures
-TEST_SEEDS = tuple(range(100, 104))  # held out: never in training or validation
-METHODS = ("fusion", "stereo", "mono_gt_align", "sgbm")
+TEST_SEEDS = tuple(range(100, 104))  # held out: never in training or validation; scored once, at the end
+VAL_SEEDS = tuple(range(200, 204))  # held out as well, rendered alike: the model's decisions are made on these
+SPLITS: dict[str, tuple[int, ...]] = {"test": TEST_SEEDS, "val": VAL_SEEDS}
 REGIONS = ("all", "picture", "mirror", "non_illusion")
+BASELINES = ("mono_gt_align", "sgbm")  # untrained: scored once per benchmark, not per seed
 TRAIN_OVERRIDES: dict[str, Any] = {"train.batch_size": 2, "train.crop": (160, 288), "train.val_every": 200,
                                    "train.checkpoint_every": 200}
 DEFAULT_STEPS = 1500
 SPLIT = "train=0.85,val=0.15"
 
 
-def run_fusion_bench(work_dir: Path, *, seeds: int = 1, steps: int = DEFAULT_STEPS) -> dict[str, Any]:
-    """Prepare (or reuse) the data in ``work_dir``, train ``seeds`` runs and score every method on
-    the held-out test pairs. Returns per method and region the mean (and spread over seeds) of EPE
-    and bad-2, the disparity ranges of training and test, and the timings."""
+@dataclass(frozen=True)
+class Network:
+    """A network each benchmark seed trains: ``lite`` with TRAIN_OVERRIDES and ``overrides``, scored as
+    ``methods`` ({report key: method of model.methods})."""
+
+    name: str
+    overrides: Mapping[str, Any]
+    methods: Mapping[str, str]
+
+
+FUSION = Network("fusion", {}, {"fusion": "fusion", "stereo": "stereo"})
+# --ablations, the paper's in miniature. no_vlm: the confidence from image features alone (the PF
+# ablation). stereo_only: the stereo branch alone (model.use_mono off: its context encoder is fed a
+# constant instead of the mono input, no confidence or fusion, RAFT-Stereo's sequence loss), trained
+# the same way on the same data; unlike the fusion network's stereo branch it never sees the mono input.
+ABLATIONS = (Network("no_vlm", {"model.use_vlm": False}, {"fusion_no_vlm": "fusion"}),
+             Network("stereo_only", {"model.use_vlm": False, "model.use_mono": False}, {"stereo_only": "stereo"}))
+
+
+def run_fusion_bench(work_dir: Path, *, seeds: int = 1, steps: int = DEFAULT_STEPS, ablations: bool = False,
+                     split: str = "test") -> dict[str, Any]:
+    """Prepare (or reuse) the data in ``work_dir``, train per seed the fusion network (and, with
+    ``ablations``, the no-VLM and stereo-only ones) and score every method on the held-out pairs of
+    ``split`` (SPLITS). Returns per method and region the mean (and spread over seeds) of EPE and
+    bad-2, the disparity ranges of training and the pairs, and the timings (seconds)."""
     started = time.perf_counter()
     rt, cached = prepared_workspace(work_dir / "workspace")
     prepare_s = time.perf_counter() - started
     train_range = training_disparity_range(rt)
-    test, baseline = test_samples(train_range)
-    test_range = _range(np.concatenate([s.disparity[np.isfinite(s.disparity)] for s in test]))
-    runs = []
-    for seed in range(seeds):
-        runs.append(_train_and_score(rt, seed, steps, test))
+    pairs, render_s, info = _held_out(train_range, split)
+    networks = (FUSION, *ABLATIONS) if ablations else (FUSION,)
+    timed = time.perf_counter()
+    baselines = _score(pairs, build_methods(list(BASELINES), checkpoint=None, predictions=None, mono_dir=None))
+    baselines_s = time.perf_counter() - timed
+    runs = [_seed_run(rt, seed, steps, pairs, networks) for seed in range(seeds)]
     rt.close()
     return {
-        "methods": _aggregate([r["methods"] for r in runs]),
+        "methods": {**_aggregate([r["methods"] for r in runs]), **_aggregate([baselines])},
         "seeds": seeds, "steps": steps, "preset": "lite", "size": f"{SIZE[0]}x{SIZE[1]}",
-        "train_disparity_px": train_range, "test_disparity_px": test_range, "test_baseline_m": round(baseline, 4),
-        "test_samples": len(test), "test_seeds": list(TEST_SEEDS),
-        "prepare_s": round(prepare_s, 1), "prepare_cached": cached,
-        "train_s": [r["train_s"] for r in runs], "runs": [r["run"] for r in runs],
+        "networks": {n.name: {"overrides": dict(n.overrides), "methods": list(n.methods)} for n in networks},
+        "train_disparity_px": train_range, "pairs": info, "prepare_cached": cached,
+        "timings_s": {"prepare": round(prepare_s, 1), "render_pairs": round(render_s, 1),
+                      "score_baselines": round(baselines_s, 1),
+                      "train": {n.name: [r["networks"][n.name]["train_s"] for r in runs] for n in networks},
+                      "score": {n.name: [r["networks"][n.name]["score_s"] for r in runs] for n in networks},
+                      "total": round(time.perf_counter() - started, 1)},
+        "runs": [{"seed": r["seed"], **{name: net["run"] for name, net in r["networks"].items()}} for r in runs],
     }
+
+
+def _held_out(train_range: list[float], split: str) -> tuple[list[StereoSample], float, dict[str, Any]]:
+    """The pairs of ``split``, the seconds rendering them took, and what describes them."""
+    if split not in SPLITS:
+        raise ValueError(f"unknown split {split!r}; choose {' or '.join(SPLITS)}")
+    started = time.perf_counter()
+    pairs, baseline = test_samples(train_range, SPLITS[split])
+    values = np.concatenate([s.disparity[np.isfinite(s.disparity)] for s in pairs])
+    info = {"split": split, "seeds": list(SPLITS[split]), "samples": len(pairs), "disparity_px": _range(values),
+            "baseline_m": round(baseline, 4)}
+    return pairs, time.perf_counter() - started, info
 
 
 def prepared_workspace(home: Path) -> tuple[Runtime, bool]:
@@ -164,51 +210,70 @@ def test_samples(train_range: list[float], seeds: tuple[int, ...] = TEST_SEEDS,
     return samples, baseline
 
 
-def run_mono_bench(work_dir: Path) -> dict[str, Any]:
-    """mono-gt-align on the held-out test pairs, no training: EPE and bad-2 per region, the
+def run_mono_bench(work_dir: Path, *, split: str = "test") -> dict[str, Any]:
+    """mono-gt-align on the held-out pairs of ``split``, no training: EPE and bad-2 per region, the
     non-illusion bad-2 (the monocular model's calibration figure) on top. Prepares (or reuses) the
-    workspace in ``work_dir`` for the training disparity range that fixes the test baseline."""
+    workspace in ``work_dir`` for the training disparity range that fixes the pairs' baseline."""
     started = time.perf_counter()
     rt, cached = prepared_workspace(work_dir / "workspace")
     train_range = training_disparity_range(rt)
     rt.close()
-    test, baseline = test_samples(train_range)
-    figures = mono_figures(test)
+    pairs, _render_s, info = _held_out(train_range, split)
+    figures = mono_figures(pairs)
     return {"non_illusion_bad2": figures["non_illusion"]["bad2"], "methods": {"mono_gt_align": figures},
-            "size": f"{SIZE[0]}x{SIZE[1]}", "test_samples": len(test), "test_seeds": list(TEST_SEEDS),
-            "train_disparity_px": train_range, "test_baseline_m": round(baseline, 4),
+            "size": f"{SIZE[0]}x{SIZE[1]}", "train_disparity_px": train_range, "pairs": info,
             "prepare_cached": cached, "seconds": round(time.perf_counter() - started, 1)}
 
 
 def mono_figures(samples: list[StereoSample]) -> dict[str, dict[str, float]]:
     """mono-gt-align's EPE (px) and bad-2 (%) per region of REGIONS, mean over ``samples``."""
-    report = evaluate(samples, build_methods(["mono_gt_align"], checkpoint=None, predictions=None, mono_dir=None),
-                      EvalOptions(regions=REGIONS))
-    if report["failed"]:
-        raise RuntimeError(f"mono-gt-align failed on {report['failed'][:3]}")
-    regions = report["methods"]["mono_gt_align"]["regions"]
-    return {r: {k: round(regions[r][k], 3) for k in ("epe", "bad2")} for r in REGIONS}
+    figures = _score(samples, build_methods(["mono_gt_align"], checkpoint=None, predictions=None, mono_dir=None))
+    return {r: {k: round(v, 3) for k, v in f.items()} for r, f in figures["mono_gt_align"].items()}
 
 
-def _train_and_score(rt: Runtime, seed: int, steps: int, test: list[StereoSample]) -> dict[str, Any]:
+def _seed_run(rt: Runtime, seed: int, steps: int, pairs: list[StereoSample],
+              networks: tuple[Network, ...]) -> dict[str, Any]:
+    """Each of ``networks`` trained with ``seed`` and scored on ``pairs``: their figures by report key,
+    and per network its run id and the seconds its training and its scoring took."""
+    figures: dict[str, Any] = {}
+    timings: dict[str, dict[str, Any]] = {}
+    for network in networks:
+        run_id, checkpoint, train_s = _train(rt, seed, steps, network)
+        started = time.perf_counter()
+        built = build_methods(sorted(set(network.methods.values())), checkpoint=checkpoint, predictions=None,
+                              mono_dir=None)
+        figures.update(_score(pairs, {key: built[method] for key, method in network.methods.items()}))
+        timings[network.name] = {"run": run_id, "train_s": round(train_s, 1),
+                                 "score_s": round(time.perf_counter() - started, 1)}
+    return {"seed": seed, "methods": figures, "networks": timings}
+
+
+def network_overrides(network: Network, steps: int) -> dict[str, Any]:
+    """The overrides of ``lite`` that ``network`` is trained with for ``steps`` steps."""
+    return {**TRAIN_OVERRIDES, "train.steps": steps, **network.overrides}
+
+
+def _train(rt: Runtime, seed: int, steps: int, network: Network) -> tuple[int, Path, float]:
+    """Train ``network`` through the product's training job: (run id, best checkpoint, seconds)."""
     with transaction(rt.sessions) as s:
         admin = s.scalar(select(User).where(User.name == "bench-admin"))
         run = run_control.launch(
-            rt, s, preset="lite", overrides={**TRAIN_OVERRIDES, "train.steps": steps},
-            selection=training.DataSelection(), launch=training.Launch(split=training.parse_split(SPLIT), seed=seed),
-            user=admin)
+            rt, s, preset="lite", overrides=network_overrides(network, steps), selection=training.DataSelection(),
+            launch=training.Launch(split=training.parse_split(SPLIT), seed=seed), user=admin)
         run_id = run.id
     started = time.perf_counter()
     _run_jobs(rt)
     train_s = time.perf_counter() - started
-    checkpoint = training.run_dir(rt.settings.runs_dir, run_id) / "checkpoints" / "best.pt"
-    methods = build_methods(list(METHODS), checkpoint=checkpoint, predictions=None, mono_dir=None)
-    report = evaluate(test, methods, EvalOptions(regions=REGIONS))
+    return run_id, training.run_dir(rt.settings.runs_dir, run_id) / "checkpoints" / "best.pt", train_s
+
+
+def _score(pairs: list[StereoSample], methods: dict[str, Predict]) -> dict[str, dict[str, dict[str, float]]]:
+    """EPE (px) and bad-2 (%) per method and region of REGIONS, mean over ``pairs``."""
+    report = evaluate(pairs, methods, EvalOptions(regions=REGIONS))
     if report["failed"]:
         raise RuntimeError(f"benchmark evaluation failed on {report['failed'][:3]}")
-    figures = {m: {r: {k: d["regions"][r][k] for k in ("epe", "bad2")} for r in REGIONS}
-               for m, d in report["methods"].items()}
-    return {"run": run_id, "train_s": round(train_s, 1), "methods": figures}
+    return {m: {r: {k: d["regions"][r][k] for k in ("epe", "bad2")} for r in REGIONS}
+            for m, d in report["methods"].items()}
 
 
 def _aggregate(per_seed: list[dict[str, Any]]) -> dict[str, Any]:

@@ -161,16 +161,25 @@ def model_benchmark(as_json: bool, repeats: int, train_steps: int) -> None:
 @click.option("--work-dir", type=click.Path(file_okay=False, path_type=Path), default=Path("var/bench-fusion"),
               show_default=True, help="Where the prepared data is cached between runs.")
 @click.option("--mono-only", is_flag=True,
-              help="No training: score mono-gt-align alone on the test pairs (the monocular input's calibration).")
-def fusion_benchmark(as_json: bool, seeds: int, steps: int | None, work_dir: Path, mono_only: bool) -> None:
+              help="No training: score mono-gt-align alone on the held-out pairs (the monocular input's calibration).")
+@click.option("--ablations", is_flag=True,
+              help="Per seed, also train the no-VLM network (use_vlm = false) and the stereo-only one (use_mono = false).")
+@click.option("--split", type=click.Choice(["test", "val"]), default="test", show_default=True,
+              help="The held-out pairs scored: val (seeds of its own) to decide on, test once, at the end.")
+def fusion_benchmark(as_json: bool, seeds: int, steps: int | None, work_dir: Path, mono_only: bool,
+                     ablations: bool, split: str) -> None:
     """The synthetic illusion benchmark: train lite on the product's own samples and rendered captures,
-    score fusion, stereo, mono-gt-align and sgbm on held-out rendered pairs (all, picture, mirror, non-illusion)."""
+    score fusion, stereo, mono-gt-align and sgbm (with --ablations also fusion_no_vlm and stereo_only)
+    on held-out rendered pairs (all, picture, mirror, non-illusion)."""
     from webapp.benchmarks.fusion import DEFAULT_STEPS, run_fusion_bench, run_mono_bench
 
     if mono_only:
-        _report(run_mono_bench(work_dir.absolute()), as_json)
+        if ablations:
+            raise click.UsageError("--ablations trains networks and --mono-only trains none: pass one of them")
+        _report(run_mono_bench(work_dir.absolute(), split=split), as_json)
         return
-    _report(run_fusion_bench(work_dir.absolute(), seeds=seeds, steps=steps or DEFAULT_STEPS), as_json)
+    _report(run_fusion_bench(work_dir.absolute(), seeds=seeds, steps=steps or DEFAULT_STEPS, ablations=ablations,
+                             split=split), as_json)
 
 
 def _report(results: dict[str, object], as_json: bool) -> None:

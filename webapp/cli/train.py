@@ -204,20 +204,30 @@ def checkpoints() -> None:
 @pass_state
 def upgrade(state: CliState, paths: tuple[Path, ...], every: bool) -> None:
     """Rewrite checkpoints of an earlier release (their trainer state held numpy objects) so that
-    they load with weights-only loading, the only loading there is. This one step unpickles the
-    files: name only checkpoints you trust."""
+    they load with weights-only loading, the only loading there is. Reading them allows numpy's
+    arrays and nothing else: a file that needs more is reported and left alone."""
     from model.checkpoint import upgrade_checkpoint
 
     if every:
-        paths = (*paths, *sorted(state.settings.runs_dir.glob("*/checkpoints/*.pt")))
+        paths = (*paths, *_run_checkpoint_files(state.settings.runs_dir))
     if not paths:
         raise click.UsageError("name checkpoint files, or --all for every run's")
+    failed = 0
     for path in paths:
         if path.is_symlink():
             click.echo(f"{path}: a symbolic link, skipped")
             continue
         try:
-            changed = upgrade_checkpoint(path)
-        except ValueError as exc:
-            raise click.ClickException(str(exc)) from None
-        click.echo(f"{path}: {'upgraded' if changed else 'already loads safely'}")
+            click.echo(f"{path}: {'upgraded' if upgrade_checkpoint(path) else 'already loads safely'}")
+        except (ValueError, OSError) as exc:
+            failed += 1
+            click.echo(f"{path}: left alone: {exc}", err=True)
+    if failed:
+        raise click.ClickException(f"{failed} of {len(paths)} checkpoint(s) could not be upgraded (see above)")
+
+
+def _run_checkpoint_files(runs_dir: Path) -> list[Path]:
+    """``runs/<id>/checkpoints/*.pt``, never through a linked run or checkpoint folder."""
+    runs = [run for run in runs_dir.iterdir() if not run.is_symlink()] if runs_dir.is_dir() else []
+    return sorted(path for run in runs if not (run / "checkpoints").is_symlink()
+                  for path in (run / "checkpoints").glob("*.pt"))

@@ -42,7 +42,7 @@ bp = Blueprint("evaluations", __name__)
 def index() -> ResponseReturnValue:
     """The launch form and every evaluation with its state and progress (live, from the API)."""
     settings = runtime().settings
-    runs = [r.id for r in training.list_runs(g.db)]
+    runs = [run_id for run_id, _ in training.recent_runs(g.db, 200)]
     return render_template("evaluations.html", formats=READER_FORMATS, methods=METHODS, default_methods=DEFAULT_METHODS,
                            resolutions=list(RESOLUTIONS), align_rules=ALIGN_RULES, runs=runs,
                            current=registry.current_model(settings), roots=sorted(settings.dataset_roots),

@@ -6,19 +6,20 @@ API (``/api/v1/runs…``), which enforces the same roles.
 
 from __future__ import annotations
 
-from flask import Blueprint, Response, abort, g, render_template, request, send_file
+from flask import Blueprint, Response, abort, g, render_template, send_file
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
+from dataset.contained import contained_file
 from dataset.models import IllusionType, Role, Video
 from dataset.readers import READER_FORMATS
 from dataset.services import run_logs, training
 from model import registry
 from model.fit import suggest_crop
 from model.presets import load_preset
-from webapp.api.blueprint import int_arg
+from webapp.api.blueprint import id_list_arg, int_arg
 from webapp.auth import requires
-from webapp.redact import app_rewrites, redact
+from webapp.redact import app_redactor
 from webapp.runtime import runtime
 
 bp = Blueprint("models", __name__)
@@ -53,7 +54,7 @@ def run(run_id: int) -> ResponseReturnValue:
 @requires(Role.curator)
 def compare() -> ResponseReturnValue:
     """Two or more runs (``?ids=1,2``): curves on one chart, last validation metrics side by side."""
-    ids = [int(v) for v in request.args.get("ids", "").split(",") if v.strip().isdigit()]
+    ids = id_list_arg("ids")
     return render_template("compare.html", ids=ids)
 
 
@@ -63,9 +64,8 @@ def val_image(run_id: int, name: str) -> ResponseReturnValue:
     """A validation image the engine wrote, by its path in the run directory (``val/step_…/x.png``)."""
     training.get_run(g.db, run_id)
     directory = training.run_dir(runtime().settings.runs_dir, run_id)
-    root = (directory / "val").resolve()
-    path = (directory / name).resolve()
-    if not path.is_relative_to(root) or path.suffix != ".png" or not path.is_file():
+    path = contained_file(directory, name)
+    if path is None or path.suffix != ".png" or not path.is_relative_to(directory.resolve() / "val"):
         abort(404, f"run {run_id} has no validation image {name!r}")
     return send_file(path, mimetype="image/png", max_age=3600, conditional=True)
 
@@ -90,8 +90,8 @@ def run_log_file(run_id: int) -> ResponseReturnValue:
     directory = training.run_dir(settings.runs_dir, run_id)
     if not run_logs.rank0_files(directory):
         abort(404, f"run {run_id} has no log yet: its trainers have not started")
-    rewrites = app_rewrites()
-    lines = (redact(line.encode(), rewrites) for line in run_logs.log_lines(directory))
+    redact = app_redactor()
+    lines = (redact(line.encode()) for line in run_logs.log_lines(directory))
     return Response(lines, mimetype="text/plain",
                     headers={"Content-Disposition": f'attachment; filename="run{run_id}_rank0.log"',
                              "Cache-Control": "no-store"})
