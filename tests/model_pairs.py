@@ -15,6 +15,6 @@ def random_dot_pair(height: int, width: int, disparity: float, seed: int = 0) ->
     base = rng.uniform(0, 255, (height // 2, (width + d) // 2 + 1, 3)).astype(np.float32)
     texture = cv2.resize(base, (width + d + 2, height), interpolation=cv2.INTER_LINEAR)
     texture = np.clip(texture, 0, 255).astype(np.uint8)
-    left = np.ascontiguousarray(texture[:, d: d + width])
-    right = np.ascontiguousarray(texture[:, :width])
+    left = np.ascontiguousarray(texture[:, :width])
+    right = np.ascontiguousarray(texture[:, d: d + width])
     return left, right, np.full((height, width), float(d), np.float32)

@@ -75,7 +75,7 @@ def test_served_to_logged_in_users_only(client, runtime, tokens) -> None:  # typ
     for attack in ("../secret_key", "..%2f..%2fsecret_key", "%2e%2e/%2e%2e/secret_key",
                    "ab/cd/" + "a" * 64 + ".png%00", "/etc/passwd"):
         response = client.get(f"/media/{attack}", headers=auth, follow_redirects=True)
-        assert response.status_code == 404, attack
+        assert response.status_code in (400, 404), attack  # a null byte is a 400 everywhere
         assert b"secret" not in response.data
 
 

@@ -137,7 +137,8 @@ def _backbones(root: Path) -> dict[str, Any]:
 
 @pytest.mark.slow
 @pytest.mark.parametrize(("preset", "overrides"), [("lite", {}), ("lite", {"use_vlm": False}), ("paper", {}),
-                                                   ("paper", {"use_vlm": False})])
+                                                   ("paper", {"use_vlm": False}),
+                                                   ("lite", {"use_vlm": False, "use_mono": False})])
 def test_every_trainable_parameter_gets_a_gradient(tmp_path: Path, preset: str, overrides: dict[str, Any]) -> None:
     # What DDP's find_unused_parameters=False relies on (model/train/loop.py).
     backbones = _backbones(tmp_path) if preset == "paper" else {}

@@ -23,10 +23,12 @@ class MaskHead(nn.Module):
 
 def convex_upsample(disparity: Tensor, mask: Tensor, factor: int) -> Tensor:
     """B×1×h×w disparity (pixels at 1/factor) → B×1×(h·factor)×(w·factor), pixels at full
-    resolution (values × factor)."""
+    resolution (values × factor). Past the image border the 3×3 window sees the edge value
+    (replicated): RAFT's zero padding pulls the outer ``factor`` pixels of each side towards 0."""
     batch, _, height, width = disparity.shape
     weights = torch.softmax(mask.view(batch, 1, 9, factor, factor, height, width), dim=2)
-    patches = F.unfold(factor * disparity, (3, 3), padding=1).view(batch, 1, 9, 1, 1, height, width)
+    edged = F.pad(factor * disparity, (1, 1, 1, 1), mode="replicate")
+    patches = F.unfold(edged, (3, 3)).view(batch, 1, 9, 1, 1, height, width)
     up = (weights * patches).sum(dim=2)  # B×1×f×f×h×w
     return up.permute(0, 1, 4, 2, 5, 3).reshape(batch, 1, factor * height, factor * width)
 
