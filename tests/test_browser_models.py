@@ -93,7 +93,9 @@ def test_admin_launches_a_run_and_sees_its_chart_grow(browser, server: str, tmp_
     page.click("[data-nav=models]")
     page.wait_for_selector("#runs tbody td:has-text('No runs yet.')")
     form = page.locator("#launch")
-    form.locator("[name=steps]").fill("12")
+    # Long enough for several step events (the engine writes one every 2 s, and the first and last):
+    # a run that ends before the page's first poll would show its whole curve at once.
+    form.locator("[name=steps]").fill("150")
     form.locator("[name=batch]").fill("2")
     form.locator("[name=crop]").fill("32x64")
     form.locator("[name=iters]").fill("2")
@@ -107,7 +109,7 @@ def test_admin_launches_a_run_and_sees_its_chart_grow(browser, server: str, tmp_
                            timeout=180_000)
     page.wait_for_function("() => document.getElementById('run').dataset.state === 'succeeded'", timeout=180_000)
     assert page.evaluate(points) > first, "the chart never grew while the run went"
-    assert page.locator("#fig-step").inner_text() == "12/12"
+    assert page.locator("#fig-step").inner_text() == "150/150"
     assert page.locator("#checkpoints tbody a").count() >= 1
     page.screenshot(path=str(tmp_path / "run.png"), full_page=True)
     page.click("#run-promote")

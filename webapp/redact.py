@@ -70,7 +70,9 @@ def other_server_paths(url_segments: set[str]) -> re.Pattern[bytes] | None:
     if not tops:
         return None
     names = b"|".join(re.escape(name.encode()) for name in tops)
-    return re.compile(rb"(?<![\w.~/-])/(?:" + names + rb")(?:/[\w.@+~%-]+)*/?(?![\w.-])")
+    # Not after a word, a path, a URL's host or a marker this net wrote (``[python]/lib/…``), nor a
+    # label's colon (``root:path`` names a place in a registered root).
+    return re.compile(rb"(?<![\w.~/:\]-])/(?:" + names + rb")(?:/[\w.@+~%-]+)*/?(?![\w.-])")
 
 
 def redactor_for(app: Flask, settings: Settings) -> Redactor:
