@@ -104,6 +104,9 @@ class Settings(BaseSettings):
     inpaint_backend: Literal["telea", "ns", "none", "lama"] = "telea"
     lama_model_path: Path | None = None
     device: str = Field("cpu", description="torch device for model backends: cpu, cuda, cuda:1 …")
+    proposers: list[Literal["plane-break", "vlm"]] = Field(
+        default_factory=lambda: ["plane-break"],
+        description="Illusion proposers run on frames to annotate: plane-break (no weights), vlm (the VLM backend).")
     # What the web may name and launch: dataset folders only inside these roots (by name), and
     # training runs within what a train worker's machine holds (each worker checks its own again).
     dataset_roots: dict[str, Path] = Field(

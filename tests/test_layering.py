@@ -1,7 +1,7 @@
 """The one-way house: what each package may import (DESIGN.md, README "Architecture").
 
 ``model`` may import ``dataset`` and ``annotation``; ``annotation`` imports only
-``dataset.formats``, ``dataset.filecache`` and ``dataset.atomic``; nothing imports ``webapp`` but
+``dataset.formats``, ``dataset.filecache``, ``dataset.atomic`` and ``dataset.geometry``; nothing imports ``webapp`` but
 ``webapp``; ``dataset`` never imports ``model`` or ``webapp``; ``dataset.geometry`` imports no
 Flask, database or torch. Every import counts, also those inside functions.
 """
@@ -15,7 +15,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("annotation", "dataset", "model", "webapp")
-ANNOTATION_MAY_USE = ("dataset.formats", "dataset.filecache", "dataset.atomic")
+# dataset.geometry is pure numpy/OpenCV (its own test below): the plane-break proposer fits planes with it.
+ANNOTATION_MAY_USE = ("dataset.formats", "dataset.filecache", "dataset.atomic", "dataset.geometry")
 GEOMETRY_MUST_NOT_USE = ("flask", "flask_login", "sqlalchemy", "alembic", "torch", "transformers")
 
 

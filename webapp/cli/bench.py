@@ -55,6 +55,15 @@ def click_benchmark(as_json: bool, clicks: int, no_sam2: bool) -> None:
     _report(run_click_bench(clicks=clicks, sam2=not no_sam2), as_json)
 
 
+@bench.command("proposals")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def proposals_benchmark(as_json: bool) -> None:
+    """Illusion proposers on held-out synthetic videos: recall, precision, IoU, ms, and clicks saved."""
+    from webapp.benchmarks.proposals import run_proposals_bench
+
+    _report(run_proposals_bench(), as_json)
+
+
 @bench.command("generate")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("--repeats", type=click.IntRange(min=1), default=3, show_default=True)

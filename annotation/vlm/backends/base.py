@@ -26,3 +26,17 @@ class PrefilterBackend(Protocol):
     def close(self) -> None:
         """Release connections, threads and model memory."""
         ...
+
+
+class AskError(RuntimeError):
+    """A free prompt got no answer (server unreachable, HTTP error, generation failed)."""
+
+
+@runtime_checkable
+class FreePromptBackend(Protocol):
+    """A backend that also answers a free prompt (the VLM ones; the heuristic backend cannot)."""
+
+    def ask(self, image: np.ndarray, prompt: str, max_tokens: int = 512) -> str:
+        """The model's reply to ``prompt`` about ``image`` (RGB uint8 HxWx3), at most ``max_tokens``
+        tokens, greedy; AskError when no reply came."""
+        ...

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import httpx
 import numpy as np
 
+from annotation.vlm.backends.base import AskError
 from annotation.vlm.dataurl import image_to_data_url
 from annotation.vlm.prompt import ANSWER_TOKEN_BUDGET, PROMPT, PROMPT_VERSION
 from annotation.vlm.rule import KeepRule
@@ -82,6 +83,16 @@ class OpenAICompatBackend:
         """One Verdict per RGB uint8 HxWx3 image, ``concurrency`` requests in flight at most."""
         return list(self._pool.map(self._classify_one, images))
 
+    def ask(self, image: np.ndarray, prompt: str, max_tokens: int = 512) -> str:
+        """The reply to a free ``prompt`` about ``image`` (same retries as ``classify``); AskError without one."""
+        problem = image_problem(image)
+        if problem:
+            raise AskError(problem)
+        outcome = self._ask(image, prompt, max_tokens)
+        if outcome.content is None:
+            raise AskError(outcome.error or "no answer")
+        return outcome.content
+
     def close(self) -> None:
         """Stop the worker threads and close the connections."""
         self._pool.shutdown(wait=True)
@@ -99,7 +110,7 @@ class OpenAICompatBackend:
             return Verdict.failed(problem)
         started = time.perf_counter()
         try:
-            outcome = self._ask(image)
+            outcome = self._ask(image, PROMPT, ANSWER_TOKEN_BUDGET)
         except Exception as exc:  # a bug here must cost one frame, not the batch
             logger.exception("prefilter request failed unexpectedly")
             outcome = _Outcome(None, f"unexpected {type(exc).__name__}: {exc}", 0)
@@ -108,7 +119,7 @@ class OpenAICompatBackend:
             return Verdict.failed(outcome.error or "no answer", raw=outcome.raw, metrics=metrics)
         return Verdict.from_text(outcome.content, self._rule, metrics=metrics)
 
-    def _ask(self, image: np.ndarray) -> _Outcome:
+    def _ask(self, image: np.ndarray, prompt: str, max_tokens: int) -> _Outcome:
         payload = {
             "model": self.model_id,
             "messages": [
@@ -116,12 +127,12 @@ class OpenAICompatBackend:
                     "role": "user",
                     "content": [
                         {"type": "image_url", "image_url": {"url": image_to_data_url(image, self._jpeg_quality)}},
-                        {"type": "text", "text": PROMPT},
+                        {"type": "text", "text": prompt},
                     ],
                 }
             ],
             "temperature": 0,
-            "max_tokens": ANSWER_TOKEN_BUDGET,
+            "max_tokens": max_tokens,
         }
         problem, retry_after = "", None
         attempts = self._max_retries + 1

@@ -23,6 +23,7 @@ import torch
 from transformers import AutoImageProcessor, AutoModelForImageTextToText, AutoTokenizer
 
 from annotation.checkpoints import open_checkpoint
+from annotation.vlm.backends.base import AskError
 from annotation.vlm.prompt import ANSWER_TOKEN_BUDGET, PROMPT, PROMPT_VERSION
 from annotation.vlm.rule import KeepRule
 from annotation.vlm.verdict import Verdict, image_problem
@@ -69,8 +70,7 @@ class TransformersQwenBackend:
         self._image_token = self._tokenizer.convert_ids_to_tokens(self._image_token_id)
         # Left padding: every row of a batch must end where generation starts.
         self._tokenizer.padding_side = "left"
-        messages = [{"role": "user", "content": [{"type": "image"}, {"type": "text", "text": PROMPT}]}]
-        self._prompt = self._tokenizer.apply_chat_template(messages, add_generation_prompt=True, tokenize=False)
+        self._prompt = self._chat(PROMPT)
         if self._prompt.count(self._image_token) != 1:
             raise ValueError(f"the chat template of {path} does not place one {self._image_token} per image")
         self.model_id = checkpoint.model_id(checkpoint.model_type)
@@ -100,19 +100,35 @@ class TransformersQwenBackend:
                 verdicts[i] = Verdict.from_text(reply, self._rule, metrics=metrics)
         return [v for v in verdicts if v is not None]
 
+    def ask(self, image: np.ndarray, prompt: str, max_tokens: int = 512) -> str:
+        """The greedy reply to a free ``prompt`` about ``image``; AskError when generation fails."""
+        problem = image_problem(image)
+        if problem:
+            raise AskError(problem)
+        try:
+            return self._generate([image], self._chat(prompt), max_tokens)[0]
+        except Exception as exc:  # out of memory, a bad checkpoint, …: the caller decides
+            raise AskError(f"generation failed ({type(exc).__name__}: {exc})") from exc
+
     def close(self) -> None:
         """Drop the model so its memory can be freed."""
         del self._model
         if torch.cuda.is_available():
             torch.cuda.empty_cache()
 
+    def _chat(self, text: str) -> str:
+        """The chat-templated prompt: one image, then ``text``, then the assistant's turn."""
+        messages = [{"role": "user", "content": [{"type": "image"}, {"type": "text", "text": text}]}]
+        return self._tokenizer.apply_chat_template(messages, add_generation_prompt=True, tokenize=False)
+
     @torch.inference_mode()
-    def _generate(self, images: Sequence[np.ndarray]) -> list[str]:
+    def _generate(self, images: Sequence[np.ndarray], prompt: str | None = None,
+                  max_new_tokens: int | None = None) -> list[str]:
         vision = self._image_processor(images=list(images), return_tensors="pt")
         tokens_per_patch = self._image_processor.merge_size**2
         # What Qwen2VLProcessor does: one image token per merged patch of that image.
         texts = [
-            self._prompt.replace(self._image_token, self._image_token * (int(grid.prod()) // tokens_per_patch), 1)
+            (prompt or self._prompt).replace(self._image_token, self._image_token * (int(grid.prod()) // tokens_per_patch), 1)
             for grid in vision["image_grid_thw"]
         ]
         text = self._tokenizer(texts, padding=True, return_tensors="pt")
@@ -120,5 +136,6 @@ class TransformersQwenBackend:
         text["mm_token_type_ids"] = (text["input_ids"] == self._image_token_id).long()
         inputs = {name: tensor.to(self._device) for name, tensor in {**text, **vision}.items()}
         inputs["pixel_values"] = inputs["pixel_values"].to(self._model.dtype)
-        output = self._model.generate(**inputs, max_new_tokens=self._max_new_tokens, do_sample=False)
+        output = self._model.generate(**inputs, max_new_tokens=max_new_tokens or self._max_new_tokens,
+                                     do_sample=False)
         return self._tokenizer.batch_decode(output[:, text["input_ids"].shape[1] :], skip_special_tokens=True)

@@ -1,0 +1,32 @@
+"""Choose proposers by their configured names (settings ``proposers``)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from annotation.proposals.base import Proposer
+from annotation.segment.base import Segmenter
+from annotation.vlm.backends.base import PrefilterBackend
+
+PROPOSERS = ("plane-break", "vlm")
+
+
+def make_proposers(names: Sequence[str], *, vlm: PrefilterBackend | None = None,
+                   segmenter: Segmenter | None = None) -> list[Proposer]:
+    """The proposers called ``names``, in order. ``vlm`` (the configured VLM backend) and ``segmenter``
+    serve the "vlm" proposer; ValueError with a one-line reason for an unknown name or a missing part."""
+    proposers: list[Proposer] = []
+    for name in names:
+        if name == "plane-break":
+            from annotation.proposals.plane_break import PlaneBreakProposer
+
+            proposers.append(PlaneBreakProposer())
+        elif name == "vlm":
+            if vlm is None or segmenter is None:
+                raise ValueError("the vlm proposer needs the configured VLM backend and segmenter")
+            from annotation.proposals.vlm import VlmProposer
+
+            proposers.append(VlmProposer(vlm, segmenter))
+        else:
+            raise ValueError(f"unknown proposer {name!r}; choose among {', '.join(PROPOSERS)}")
+    return proposers
