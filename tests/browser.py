@@ -117,7 +117,12 @@ def login(page, url: str, name: str, password: str) -> None:  # type: ignore[no-
 def page_with_errors(browser):  # type: ignore[no-untyped-def]
     """A 1366×768 page and the list its JavaScript errors and console errors are collected in."""
     page = browser.new_page(viewport={"width": 1366, "height": 768})
+    return page, collect_errors(page)
+
+
+def collect_errors(page) -> list[str]:  # type: ignore[no-untyped-def]
+    """The list ``page``'s uncaught script errors and console errors are appended to."""
     errors: list[str] = []
     page.on("pageerror", lambda error: errors.append(str(error)))
     page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-    return page, errors
+    return errors

@@ -22,7 +22,7 @@ from dataset.services import users as user_service
 from dataset.services.ingest import ingest_params
 from dataset.services.sample_review import review_sample
 from dataset.synthetic import write_synthetic_dataset
-from tests.browser import login, serving
+from tests.browser import collect_errors, login, serving
 from tests.conftest import PASSWORD, make_settings
 from tests.test_browser_annotate import click_image, interior, shown_frame
 from tests.test_returned_frames import submitted_and_generated
@@ -75,9 +75,7 @@ def open_page(browser, server: dict[str, Any]):  # type: ignore[no-untyped-def]
         context = browser.new_context(viewport=VIEWPORT)
         contexts.append(context)
         page = context.new_page()
-        errors: list[str] = []
-        page.on("pageerror", lambda error: errors.append(str(error)))
-        page.on("console", lambda message: message.type == "error" and errors.append(message.text))
+        errors = collect_errors(page)
         login(page, server["url"], role, PASSWORD)
         return page, errors
 

@@ -12,7 +12,7 @@ import pytest
 from dataset.db import migrate, transaction
 from dataset.models import Role
 from dataset.services import users as user_service
-from tests.browser import login, serving
+from tests.browser import login, page_with_errors, serving
 from tests.conftest import PASSWORD, make_settings
 from webapp.runtime import Runtime
 
@@ -38,10 +38,7 @@ def test_admin_deactivates_after_a_confirmation_and_errors_stay_on_the_page(brow
     from playwright.sync_api import expect
 
     url = server
-    page = browser.new_page(viewport={"width": 1366, "height": 768})
-    errors: list[str] = []
-    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-    page.on("pageerror", lambda e: errors.append(str(e)))
+    page, errors = page_with_errors(browser)
     login(page, url, "admin", PASSWORD)
     page.click("[data-nav=users]")
     page.wait_for_url(f"{url}/admin/users")
