@@ -467,3 +467,56 @@ class AuditEntry(Base):
     target_id: Mapped[int | None]
     detail: Mapped[dict[str, Any]] = mapped_column(default=dict)
     created_at: Mapped[datetime] = mapped_column(default=utcnow, index=True)
+
+
+class ProposalFate(enum.StrEnum):
+    """What became of a proposal: still waiting, taken as it was, taken after the annotator's edits,
+    or turned down (explicitly, or left untouched when the frame was submitted)."""
+
+    pending = "pending"
+    accepted = "accepted"
+    edited = "edited"
+    rejected = "rejected"
+
+
+class ProposalScan(Base):
+    """One proposer having looked at one frame: its ``note`` says why it found nothing when it could
+    not look; ``misses`` (set on submit) counts the submitted illusions none of its proposals matched."""
+
+    __tablename__ = "proposal_scans"
+    __table_args__ = (UniqueConstraint("frame_id", "source", name="uq_proposal_scans_frame_source"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    frame_id: Mapped[int] = mapped_column(ForeignKey("frames.id", ondelete="CASCADE"))
+    source: Mapped[str] = mapped_column(String(32), index=True, doc="The proposer's name.")
+    content_sha256: Mapped[str] = mapped_column(String(64), doc="The frame content it looked at.")
+    note: Mapped[str] = mapped_column(Text, default="")
+    seconds: Mapped[float] = mapped_column(default=0.0, doc="Wall time the proposer took on the frame.")
+    misses: Mapped[int | None] = mapped_column(doc="Submitted illusions it did not find (IoU < 0.5); null until submit.")
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+    proposals: Mapped[list[Proposal]] = relationship(back_populates="scan", cascade="all, delete-orphan",
+                                                     order_by="Proposal.rank")
+
+
+class Proposal(Base):
+    """A machine-proposed illusion/support pair (COCO RLE masks) and its fate."""
+
+    __tablename__ = "proposals"
+    __table_args__ = (Index("ix_proposals_frame_id", "frame_id"), Index("ix_proposals_source_fate", "source", "fate"))
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    scan_id: Mapped[int] = mapped_column(ForeignKey("proposal_scans.id", ondelete="CASCADE"), index=True)
+    frame_id: Mapped[int] = mapped_column(ForeignKey("frames.id", ondelete="CASCADE"))
+    source: Mapped[str] = mapped_column(String(32))
+    rank: Mapped[int] = mapped_column(doc="0 = the proposer's best.")
+    type_guess: Mapped[str | None] = mapped_column(String(32), doc="picture | mirror | transparent, or none.")
+    score: Mapped[float]
+    illusion_rle: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    support_rle: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    fate: Mapped[ProposalFate] = mapped_column(_enum(ProposalFate), default=ProposalFate.pending)
+    iou: Mapped[float | None] = mapped_column(doc="IoU of the proposed and the submitted illusion (accepted/edited).")
+    decided_by: Mapped[int | None] = mapped_column(ForeignKey("users.id", ondelete="SET NULL"))
+    decided_at: Mapped[datetime | None]
+
+    scan: Mapped[ProposalScan] = relationship(back_populates="proposals")

@@ -44,6 +44,7 @@ EXPECTED: dict[str, Role | None] = {
     "api.create_user": Role.admin,
     "api.frames": Role.annotator,
     "api.funnel": Role.annotator,
+    "api.proposers": Role.annotator,
     "api.list_jobs": Role.annotator,
     "api.get_job": Role.annotator,
     "api.retry_job": Role.curator,
@@ -61,6 +62,7 @@ EXPECTED: dict[str, Role | None] = {
     "api.save_annotation": Role.annotator,
     "api.delete_frame": Role.annotator,
     "api.propagate": Role.annotator,
+    "api.reject_proposal": Role.annotator,
     "api.list_samples": Role.annotator,
     "api.get_sample": Role.annotator,
     "api.review_sample": Role.curator,
@@ -88,7 +90,7 @@ EXPECTED: dict[str, Role | None] = {
     "evaluations.sample": Role.curator,
     "evaluations.sample_image": Role.curator,
 }
-SAMPLE_ARGS = {"user_id": "1", "job_id": "1", "frame_id": "1", "sample_id": "1", "view": "anaglyph", "asset": "index.html",
+SAMPLE_ARGS = {"user_id": "1", "job_id": "1", "frame_id": "1", "sample_id": "1", "proposal_id": "1", "view": "anaglyph", "asset": "index.html",
                "key": "ab/cd/" + "ab" * 32 + ".png", "run_id": "1", "name": "best.pt",
                "evaluation_id": "1", "method": "fusion", "image": "error"}
 CALLERS = ["anonymous", *(r.value for r in Role)]

@@ -48,6 +48,7 @@ class Proposer(Protocol):
     """Proposes illusions in one frame; never raises for what it merely fails to find."""
 
     name: str  # "plane-break" | "vlm"
+    needs_mono: bool  # whether it finds nothing without a monocular disparity
 
     def propose(self, image: np.ndarray, mono: np.ndarray | None = None) -> Proposals:
         """Proposals for ``image`` (RGB uint8 HxWx3) and its monocular disparity ``mono`` (float32

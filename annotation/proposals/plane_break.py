@@ -45,6 +45,7 @@ class PlaneBreakProposer:
     """Proposals from breaks of planar surfaces in the monocular disparity (see module doc)."""
 
     name = "plane-break"
+    needs_mono = True
 
     def __init__(self, threshold: float = 0.02, hypotheses: int = 300, seed: int = 0) -> None:
         """``threshold``: RANSAC inlier distance and the smallest step behind a plane, in normalised

@@ -51,6 +51,7 @@ class VlmProposer:
     """Proposals from the VLM's corners and the segmenter's box masks (see module doc)."""
 
     name = "vlm"
+    needs_mono = False
 
     def __init__(self, backend: PrefilterBackend, segmenter: Segmenter) -> None:
         """``backend``: the configured VLM backend (one without ``ask`` yields no proposals);

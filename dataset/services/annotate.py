@@ -15,7 +15,7 @@ from sqlalchemy.orm import Session
 
 from dataset.formats import FormatError, mask_to_rle, rle_to_mask
 from dataset.models import Annotation, Frame, FrameState, IllusionType, Region, RegionKind, User, utcnow
-from dataset.services import audit
+from dataset.services import audit, proposals
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.frames import get_frame, update_frame
 from dataset.services.leases import ensure_annotation_row, held_by_other, release_lease
@@ -101,6 +101,7 @@ def save_annotation(session: Session, frame_id: int, user: User | Any, *, versio
     if submit:
         ann.lease_user_id = ann.lease_expires_at = None
         update_frame(session, frame, state=FrameState.annotated)
+        proposals.record_fates(session, frame_id, parsed, user)
         audit.record(session, user.id, "annotation.submit", "frame", frame.id, version=ann.version,
                      pairs=sorted({r.pair for r in parsed}), illusion_type=kind.value)
     session.flush()

@@ -15,6 +15,7 @@ export function summary(job) {
   if (job.kind === "prefilter") return `${plural(r.frames, "frame")}: ${r.keep} kept, ${r.reject} dropped, ${r.undecided} to review`;
   if (job.kind === "propagate") return `drafts on ${plural(r.frames.length, "frame")}`;
   if (job.kind === "encode") return `${plural(r.encoded, "embedding")} for ${plural(r.frames, "frame")}`;
+  if (job.kind === "propose") return `${plural(r.proposals, "proposal")} on ${plural(r.scanned, "new frame")} (${r.proposers.join(", ")})`;
   if (job.kind === "train") return trainSummary(r);
   if (job.kind === "evaluate") return evaluateSummary(r);
   if (job.kind === "generate" && r.sample_id != null) {

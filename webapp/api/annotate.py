@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+import contextlib
+
 from flask import g
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
 from dataset.formats import FormatError, rle_to_mask
 from dataset.models import Frame, RegionKind, Role, User
-from dataset.services import annotate, leases, segmentation
+from dataset.services import annotate, leases, proposals, segmentation
 from dataset.services import jobs as job_service
-from dataset.services.errors import InvalidInput, NotFound
+from dataset.services.errors import InvalidInput, NotFound, Unavailable
 from dataset.services.validate import db_int, optional_text
 from webapp.api.blueprint import api, get_or_404, json_body
 from webapp.auth import requires
@@ -22,12 +24,24 @@ def _iso(value) -> str:  # type: ignore[no-untyped-def]
 
 
 def _prefetch(frame: Frame) -> None:
-    """Queue embeddings for this frame and the next ones of its video, so clicks never wait."""
+    """Queue embeddings and proposals for this frame and the next ones of its video, so clicks never wait."""
     settings = runtime().settings
-    frames = [g.db.get(Frame, i) for i in leases.prefetch_ids(g.db, frame)]
-    missing = [f.id for f in frames if not segmentation.embedding_ready(settings, f)]
+    ids = leases.prefetch_ids(g.db, frame)
+    missing = [i for i in ids if not segmentation.embedding_ready(settings, g.db.get(Frame, i))]
     if missing:
         runtime().submit(g.db, "encode", {"frame_ids": missing}, g.db.get(User, current_user.id))
+    queue_proposals(ids)
+
+
+def queue_proposals(frame_ids: list[int]) -> None:
+    """Queue the configured proposers on those of ``frame_ids`` they have not looked at (in the request's
+    transaction): frames entering the annotation queue get their proposals ahead of the annotator."""
+    todo = proposals.frames_to_scan(g.db, runtime().settings, frame_ids)
+    # A queue that is down costs nothing here (taking, keeping or approving a frame goes on): the next
+    # lease renewal queues them again.
+    with contextlib.suppress(Unavailable):
+        for chunk in proposals.propose_chunks(todo):
+            runtime().submit(g.db, "propose", {"frame_ids": chunk}, g.db.get(User, current_user.id))
 
 
 @api.post("/queue/annotate/next")
@@ -48,7 +62,15 @@ def annotate_next() -> ResponseReturnValue:
 def frame_detail(frame_id: int) -> ResponseReturnValue:
     detail = annotate.frame_detail(g.db, frame_id, current_user)
     detail["embedding_ready"] = segmentation.embedding_ready(runtime().settings, g.db.get(Frame, frame_id))
-    return detail
+    return {**detail, **proposals.frame_proposals(g.db, runtime().settings, frame_id)}
+
+
+@api.post("/frames/<int:frame_id>/proposals/<int:proposal_id>/reject")
+@requires(Role.annotator)
+def reject_proposal(frame_id: int, proposal_id: int) -> ResponseReturnValue:
+    proposal = proposals.reject_proposal(g.db, frame_id, proposal_id, current_user)
+    g.db.commit()
+    return {"id": proposal.id, "fate": proposal.fate.value}
 
 
 @api.post("/frames/<int:frame_id>/lease")

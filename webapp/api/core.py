@@ -17,6 +17,7 @@ from dataset.services import users as user_service
 from dataset.services.errors import InvalidInput, NotFound
 from dataset.services.frames import frames_page, funnel_counts, parse_state
 from dataset.services.paging import keyset_page
+from dataset.services.proposals import proposer_stats
 from dataset.services.validate import optional_text
 from webapp.api.blueprint import api, cursor_args, int_arg, json_body
 from webapp.api.openapi import openapi_document
@@ -69,6 +70,13 @@ def frames() -> ResponseReturnValue:
 @requires(Role.annotator)
 def funnel() -> ResponseReturnValue:
     return funnel_counts(g.db)
+
+
+@api.get("/stats/proposers")
+@requires(Role.annotator)
+def proposers() -> ResponseReturnValue:
+    """Per proposer: frames scanned, proposals by fate, acceptance rate, median IoU, misses."""
+    return proposer_stats(g.db)
 
 
 def _visible_jobs() -> Any:

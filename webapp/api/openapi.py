@@ -54,6 +54,7 @@ _CURSORS = [_q("after", "string", "the next cursor of a page: the page after it"
 _PAGED = {"total": {"type": "integer"}, "prev": {"type": ["string", "null"], "description": "null on the first page"},
           "next": {"type": ["string", "null"], "description": "null on the last page"}}
 _FRAME_ID = {"name": "frame_id", "in": "path", "required": True, "schema": {"type": "integer"}}
+_PROPOSAL_ID = {"name": "proposal_id", "in": "path", "required": True, "schema": {"type": "integer"}}
 _EVALUATION_ID = {"name": "evaluation_id", "in": "path", "required": True, "schema": {"type": "integer"}}
 # The Samples list by an evaluation's error (offset paging; state/flagged/cursors do not apply then).
 _BY_ERROR = [_q("evaluation", desc="an evaluation id: its database samples, worst first"),
@@ -111,6 +112,9 @@ def openapi_document() -> dict[str, Any]:
             "/frames/{frame_id}/annotation": {"post": _op(
                 "Save (submit=false: a draft) or submit the regions; a stale version is a 409", "annotator",
                 params=[_FRAME_ID], body="AnnotationSave")},
+            "/frames/{frame_id}/proposals/{proposal_id}/reject": {"post": _op(
+                "Turn a pending proposal of the frame down (409: someone else holds the frame)", "annotator",
+                params=[_FRAME_ID, _PROPOSAL_ID], schema="ProposalFate")},
             "/frames/{frame_id}/delete": {"post": _op("Mark the frame redundant or imperceptible", "annotator",
                                                       params=[_FRAME_ID], body="DeleteFrame")},
             "/frames/{frame_id}/propagate": {"post": _op(
@@ -130,6 +134,8 @@ def openapi_document() -> dict[str, Any]:
             "/samples/{sample_id}/regenerate": {"post": _op("Generate the sample again (a job)", "curator",
                                                             params=[_SAMPLE_ID], ok="202", schema="Job")},
             "/stats/funnel": {"get": _op("Pipeline funnel counts", "annotator", schema="Funnel")},
+            "/stats/proposers": {"get": _op("Per proposer: frames, proposals by fate, acceptance rate, median IoU, "
+                                            "misses", "annotator", schema="ProposerStats")},
             "/jobs": {"get": _op("List jobs (annotators: their own)", "annotator", schema="JobList",
                                  params=[_q("state", "string"), _q("limit", desc="1..500, default 50"), *_CURSORS])},
             "/jobs/{job_id}": {"get": _op("One job with its log", "annotator", params=[_JOB_ID], schema="Job")},
@@ -238,7 +244,25 @@ def openapi_document() -> dict[str, Any]:
                     "lease": {"type": "object"}, "prev_id": {"type": ["integer", "null"]},
                     "returned": {"type": ["object", "null"], "description": "why a curator sent the frame back: "
                                                                               "sample_id, reason, by, at, annotator"},
-                    "next_id": {"type": ["integer", "null"]}, "embedding_ready": {"type": "boolean"}}}]},
+                    "next_id": {"type": ["integer", "null"]}, "embedding_ready": {"type": "boolean"},
+                    "proposals": {"type": "array", "items": _ref("Proposal")},
+                    "proposals_ready": {"type": "boolean", "description": "every configured proposer has looked"},
+                    "proposals_note": {"type": "string", "description": "why there are no proposals (empty if any)"}}}]},
+                "Proposal": {"type": "object", "properties": {
+                    "id": {"type": "integer"}, "source": {"type": "string"}, "score": {"type": "number"},
+                    "illusion_type": {"enum": [*_ILLUSION_TYPES, None]}, "guess": {"type": ["string", "null"]},
+                    "illusion": {"type": "object", "description": "COCO RLE"},
+                    "support": {"type": "object", "description": "COCO RLE"},
+                    "fate": {"enum": ["pending", "accepted", "edited", "rejected"]},
+                    "iou": {"type": ["number", "null"]}}},
+                "ProposalFate": {"type": "object", "properties": {"id": {"type": "integer"}, "fate": {"type": "string"}}},
+                "ProposerStats": {"type": "object", "properties": {"proposers": {
+                    "type": "object", "additionalProperties": {"type": "object", "properties": {
+                        "frames": {"type": "integer"}, "proposals": {"type": "integer"},
+                        "pending": {"type": "integer"}, "accepted": {"type": "integer"},
+                        "edited": {"type": "integer"}, "rejected": {"type": "integer"},
+                        "acceptance_rate": {"type": ["number", "null"]}, "median_iou": {"type": ["number", "null"]},
+                        "misses": {"type": "integer"}, "ms_per_frame": {"type": ["number", "null"]}}}}}},
                 "RLE": {"type": "object", "description": "COCO run-length encoding (pycocotools)",
                         "properties": {"size": {"type": "array", "items": {"type": "integer"}}, "counts": {"type": "string"}}},
                 "Region": {"type": "object", "required": ["pair", "kind", "mask"], "properties": {

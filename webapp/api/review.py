@@ -11,6 +11,7 @@ from dataset.models import Role
 from dataset.services import review as review_service
 from dataset.services.errors import Conflict
 from dataset.services.validate import db_int, optional_text
+from webapp.api.annotate import queue_proposals
 from webapp.api.blueprint import api, cursor_args, int_arg, json_body
 from webapp.auth import requires
 
@@ -42,6 +43,7 @@ def review_frame(frame_id: int) -> ResponseReturnValue:
         current = review_service.current_item(g.db, frame_id)
         return {"error": str(exc), "status": 409, "frame": current}, 409
     item = review_service.current_item(g.db, frame.id)
+    queue_proposals([frame.id])  # an approved frame enters the annotation queue
     g.db.commit()
     return item
 
@@ -54,5 +56,7 @@ def review_bulk() -> ResponseReturnValue:
     results = review_service.review_many(g.db, items if isinstance(items, list) else [], current_user,
                                          optional_text(body.get("decision"), "decision"),
                                          optional_text(body.get("reason"), "reason"))
+    queue_proposals([r["id"] for r in results if r["status"] == 200])
     g.db.commit()
     return {"results": results}
+

@@ -22,7 +22,7 @@ from sqlalchemy import inspect, select
 from sqlalchemy.engine import make_url
 
 from dataset.db import make_engine, transaction
-from dataset.models import JobState, Role, RunState, TrainingRun, User, Video
+from dataset.models import Frame, FrameState, JobState, Role, RunState, TrainingRun, User, Video
 from dataset.services import jobs as job_service
 from dataset.services import users as user_service
 from dataset.services.errors import ServiceError
@@ -188,6 +188,7 @@ def _prepare_demo(rt: Runtime) -> None:
     the moment the server starts.
     """
     from dataset.services.demo import seed_reviews_and_annotations
+    from dataset.services.proposals import frames_to_scan, propose_chunks
 
     with click.progressbar(length=2, label="preparing the demo", file=sys.stderr) as bar:
         _run_here(rt)
@@ -197,6 +198,10 @@ def _prepare_demo(rt: Runtime) -> None:
             annotator = s.scalar(select(User).where(User.name == Role.annotator.value))
             for frame_id in seed_reviews_and_annotations(s, rt.media, curator, annotator):
                 rt.submit(s, "generate", {"frame_id": frame_id}, annotator)
+            # The approved frames left to annotate get their proposals now, as a curator's approval queues them.
+            waiting = s.scalars(select(Frame.id).where(Frame.state == FrameState.approved).order_by(Frame.id)).all()
+            for chunk in propose_chunks(frames_to_scan(s, rt.settings, waiting)):
+                rt.submit(s, "propose", {"frame_ids": chunk}, curator)
         _run_here(rt)
         bar.update(1)
 

@@ -8,6 +8,7 @@ from dataset.services.generate import generate_job
 from dataset.services.ingest import ingest_video
 from dataset.services.jobs import Handler
 from dataset.services.prefilter import prefilter_frames
+from dataset.services.proposals import propose_job
 from dataset.services.segmentation import encode_job, propagate_job
 from model.jobs import evaluate_job, train_job
 
@@ -15,6 +16,7 @@ HANDLERS: dict[str, Handler] = {
     "ingest": ingest_video,
     "prefilter": prefilter_frames,
     "encode": encode_job,
+    "propose": propose_job,
     "propagate": propagate_job,
     "generate": generate_job,
     "import_capture": import_capture_job,
