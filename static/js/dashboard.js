@@ -1,8 +1,12 @@
-// Keeps the funnel counts live as frames move through the pipeline; `?` says what each count means.
-import { api, poll } from "./api.js";
+// Keeps the funnel counts and the proposers' figures live as frames move through the pipeline; `?`
+// says what each count and column means.
+import { api, el, poll } from "./api.js";
 import { keyboardHelp } from "./help.js";
 
 const funnel = document.getElementById("funnel");
+const proposers = document.getElementById("proposers");
+const COLUMNS = ["frames", "proposals", "accepted", "edited", "rejected", "acceptance_rate", "median_iou", "misses",
+                 "ms_per_frame"];
 
 poll(async () => {
   const counts = await api(funnel.dataset.src);
@@ -14,8 +18,27 @@ poll(async () => {
   }
 }, 5000);
 
-// No keys of its own: the help reads the counts (each row's title says it too, on hover).
+// A figure as the table shows it: a rate in percent, an IoU to two places, "—" where there is none yet.
+function figure(column, value) {
+  if (value == null) return "—";
+  if (column === "acceptance_rate") return `${Math.round(100 * value)} %`;
+  if (column === "median_iou") return value.toFixed(2);
+  return column === "ms_per_frame" ? `${value.toLocaleString()} ms` : value.toLocaleString();
+}
+
+poll(async () => {
+  const stats = Object.entries((await api(proposers.dataset.src)).proposers).filter(([, s]) => s.proposals || s.frames);
+  const rows = stats.map(([name, s]) => el("tr", { dataset: { proposer: name } }, el("th", { scope: "row" }, name),
+    ...COLUMNS.map((c) => el("td", { dataset: { column: c } }, figure(c, s[c])))));
+  const empty = el("tr", { className: "empty" }, el("td", { colSpan: COLUMNS.length + 1, className: "muted" }, "No proposals yet"));
+  proposers.tBodies[0].replaceChildren(...(rows.length ? rows : [empty]));
+}, 5000);
+
+// No keys of its own: the help reads the counts and the columns (each one's title says it too, on hover).
 keyboardHelp([
+  "Funnel",
   ...[...funnel.querySelectorAll("li[data-stage]")].map((item) => [item.dataset.stage, item.title]),
-], { note: "The counts follow the pipeline live (every 5 s). A frame counts at every stage it has reached, "
+  "Proposers",
+  ...[...proposers.tHead.rows[0].cells].map((th) => [th.textContent, th.title]),
+], { note: "The figures follow the pipeline live (every 5 s). A frame counts at every stage it has reached, "
           + "so each bar is at most the one above it." });

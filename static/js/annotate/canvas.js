@@ -8,6 +8,7 @@ const DRAG_PX = 5;       // screen px a press must travel before it is a box, no
 const MAX_SCALE = 32;
 const FIT_MARGIN = 12;   // screen px around a fitted frame
 const GREEN = "#22c55e", RED = "#ef4444";
+const LABEL_FONT = "600 12px system-ui, sans-serif";
 
 export class View {
   constructor(canvas, handlers) {
@@ -21,7 +22,8 @@ export class View {
     this.fitted = true;
     this.tool = "click";
     this.brush = 8;           // radius, image px
-    this.scene = { layers: [], points: [], box: null, colour: "#fff", opacity: 0.5, hidden: false };
+    // proposals: [{ illusion: outline.js's outline, support: its outline | null, label, highlighted }]
+    this.scene = { layers: [], proposals: [], points: [], box: null, colour: "#fff", opacity: 0.5, hidden: false };
     this.drag = null;
     this.hover = null;        // last pointer position, client px
     this.space = false;
@@ -224,9 +226,11 @@ export class View {
         ctx.drawImage(layer.outline, layer.box.x, layer.box.y);
       }
       ctx.globalAlpha = 1;
+      for (const p of scene.proposals) this.proposal(p);
     }
     ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
     const at = (x, y) => [this.tx + x * scale, this.ty + y * scale];
+    if (!scene.hidden) for (const p of scene.proposals) this.label(at(p.illusion.box[0], p.illusion.box[1]), p);
     if (scene.box) this.rect(at(scene.box[0], scene.box[1]), at(scene.box[2], scene.box[3]), scene.colour);
     if (this.drag?.kind === "box") {
       const [x0, y0, x1, y1] = this.boxOf(this.drag);
@@ -245,6 +249,56 @@ export class View {
       ctx.stroke();
       ctx.setLineDash([]);
     }
+  }
+
+  // A proposal, in image coordinates: its illusion's outline dashed, white over a dark line so it
+  // reads on any image; the highlighted one bolder, faintly filled, with its support dashed lighter.
+  proposal({ illusion, support, highlighted }) {
+    const { ctx } = this;
+    if (highlighted) {
+      ctx.fillStyle = "rgba(255, 255, 255, .16)";
+      ctx.fill(illusion.path, "evenodd");
+      if (support) this.dashed(support.path, 1.5, [3, 4], 0.75);
+    }
+    this.dashed(illusion.path, highlighted ? 2.5 : 1.5, highlighted ? [9, 5] : [5, 5], highlighted ? 1 : 0.8);
+  }
+
+  // Strokes `path` (image px) `width` screen px wide, dashed `dash` (screen px).
+  dashed(path, width, dash, alpha) {
+    const { ctx, scale } = this;
+    ctx.globalAlpha = alpha;
+    ctx.lineJoin = "round";
+    ctx.lineWidth = (width + 2) / scale;
+    ctx.strokeStyle = "rgba(15, 20, 32, .75)";
+    ctx.stroke(path);
+    ctx.lineWidth = width / scale;
+    ctx.setLineDash(dash.map((d) => d / scale));
+    ctx.strokeStyle = "#fff";
+    ctx.stroke(path);
+    ctx.setLineDash([]);
+    ctx.globalAlpha = 1;
+  }
+
+  // A proposal's label, in screen px, just above the top-left corner of its outline (inside it at the
+  // top of the canvas); the highlighted one dark on white, the others white on dark.
+  label([x, y], { label, highlighted }) {
+    const { ctx } = this;
+    ctx.font = LABEL_FONT;
+    const w = ctx.measureText(label).width + 12, h = 19;
+    const left = Math.max(2, Math.min(x, this.canvas.clientWidth - w - 2));
+    const top = y - h - 4 >= 2 ? y - h - 4 : y + 4;
+    ctx.beginPath();
+    ctx.roundRect(left, top, w, h, 5);
+    ctx.fillStyle = highlighted ? "#fff" : "rgba(15, 20, 32, .82)";
+    ctx.fill();
+    if (highlighted) {
+      ctx.lineWidth = 1.5;
+      ctx.strokeStyle = "#0f1420";
+      ctx.stroke();
+    }
+    ctx.fillStyle = highlighted ? "#0f1420" : "#fff";
+    ctx.textBaseline = "middle";
+    ctx.fillText(label, left + 6, top + h / 2 + 0.5);
   }
 
   rect([x0, y0], [x1, y1], colour) {

@@ -28,13 +28,18 @@ const SHORTCUTS = [
   { keys: ["0"], show: ["0"], does: "fit the frame", command: "fit" },
   { show: ["Space+Drag", "Middle-drag"], does: "pan" },
   { keys: ["o", "Shift+o"], show: ["O", "Shift+O"], does: "masks more / less opaque", command: "opacity", repeat: true },
-  { keys: ["h"], show: ["H"], does: "hide / show the masks", command: "hide" },
+  { keys: ["h"], show: ["H"], does: "hide / show the masks and proposals", command: "hide" },
   { group: "Frame" },
   { keys: ["t"], show: ["T"], does: "illusion type of the selected plane", command: "pickType" },
   { keys: ["Enter"], show: ["Enter"], does: "submit and take the next frame", command: "submit" },
   { keys: ["ArrowLeft", "ArrowRight"], show: ["←", "→"], does: "previous / next frame of the video", command: "step" },
   { keys: ["p"], show: ["P"], does: "propagate the current pair to the next frames", command: "propagate" },
   { keys: ["Delete", "x"], show: ["Del", "X"], does: "delete the frame (redundant or imperceptible)", command: "deleteFrame" },
+  { group: "Proposals" },
+  { keys: ["a"], show: ["A"], does: "accept the highlighted proposal as a plane; clicks correct it", command: "acceptProposal" },
+  { keys: ["r"], show: ["R"], does: "reject the highlighted proposal", command: "rejectProposal" },
+  { keys: ["Tab", "Shift+Tab"], show: ["Tab", "Shift+Tab"], does: "highlight the next / previous proposal",
+    command: "highlightProposal", repeat: true },
 ];
 
 // "Ctrl+Shift+z" style names; Shift only counts where it doesn't already pick the character ("?", "+").

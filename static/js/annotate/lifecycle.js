@@ -1,5 +1,6 @@
 // A frame's way onto the page: from the queue, a link or the arrows; held with a lease (or shown
-// read-only when it can't be) and its draft restored; the queue watched while it is empty.
+// read-only when it can't be), its draft restored and its proposals offered; the queue watched while
+// it is empty.
 // Navigation runs one step at a time.
 import { api } from "../api.js";
 import { framePlace, plural } from "../labels.js";
@@ -9,6 +10,7 @@ import { commit } from "./editing.js";
 import { banner, say, saveState } from "./messages.js";
 import { $, API, page, root, sleep, ui } from "./page.js";
 import { render } from "./render.js";
+import { awaitingProposals, offerProposals, proposalsHint } from "./proposals.js";
 import { FrameSession } from "./session.js";
 import * as S from "./state.js";
 import { setTool, view } from "./tools.js";
@@ -17,6 +19,7 @@ const LEASE_S = Number(root.dataset.leaseS) || 600;
 const EDITABLE = ["approved", "annotated"];
 const QUEUE_RECHECK_MS = 8000;
 const READY_RECHECK_MS = 2000;
+const PROPOSAL_LOOKS = 90;  // × READY_RECHECK_MS: the proposals computed later come when the frame next opens
 const OTHER_ANNOTATOR = "another annotator is working on it";
 
 let nav = Promise.resolve();
@@ -88,6 +91,7 @@ async function open(id, how) {
   await loaded;
 
   page.frame = detail;
+  offerProposals(detail);
   const serverDoc = S.fromServer(detail);
   page.history = new S.History(serverDoc);
   ui.pair = serverDoc.pairs[0].id;
@@ -109,11 +113,11 @@ async function open(id, how) {
   else {
     const draft = `Draft loaded: ${plural(serverDoc.pairs.length, "plane")}`;
     if (detail.returned) say(`${draft}, sent back by ${detail.returned.by}: fix it and submit again.`);
-    else say(detail.regions.length ? `${draft}.` : "Click inside the illusion: the flat thing that looks 3D.");
+    else say(detail.regions.length ? `${draft}.` : proposalsHint() ?? "Click inside the illusion: the flat thing that looks 3D.");
     hold(serverDoc);
   }
   render();
-  watchPreparing(detail);
+  watchWorkers(detail);
   preloadNext(detail);
   root.dataset.state = "ready";
 }
@@ -195,13 +199,18 @@ function restoreDraft() {
   }
 }
 
-// The frame's embedding is being computed by a worker: say so until it is there.
-async function watchPreparing(detail) {
+// What workers compute for an open frame: its embedding (said until it is there) and its proposals
+// (shown as they come). Looked up again while either is missing and the frame is on screen.
+async function watchWorkers(detail) {
   $("preparing").hidden = detail.embedding_ready || !page.session;
-  while (!$("preparing").hidden && page.frame === detail) {
+  const missing = (looks) => !$("preparing").hidden || (awaitingProposals() && looks < PROPOSAL_LOOKS);
+  for (let looks = 0; page.frame === detail && missing(looks); looks++) {
     await sleep(READY_RECHECK_MS);
     const now = await api(`${API}/frames/${detail.id}`).catch(() => null);
-    if (now?.embedding_ready && page.frame === detail) $("preparing").hidden = true;
+    if (!now || page.frame !== detail) continue;
+    if (now.embedding_ready) $("preparing").hidden = true;
+    offerProposals(now);
+    render();
   }
 }
 

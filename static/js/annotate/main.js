@@ -4,7 +4,8 @@
 // never blocks on it. This module maps the keys to what they do and starts the page.
 // Its parts: lifecycle.js and submit.js (a frame onto the page and off it), editing.js (changes to
 // the annotation), segment.js (clicks → masks), tools.js (the canvas and its tools), panel.js,
-// render.js, messages.js and propagate.js; page.js holds the state they share.
+// render.js, messages.js, propagate.js and proposals.js (the machine's proposals to accept or reject);
+// page.js holds the state they share.
 import { keyChoices } from "../dialogs.js";
 import { keyboardHelp } from "../help.js";
 import { addPair, clearRegion, pickType, removePair, selectKind, selectPair, undoRedo } from "./editing.js";
@@ -13,6 +14,7 @@ import { start, stepFrame } from "./lifecycle.js";
 import { $, page, prefs, root } from "./page.js";
 import { listenPanel } from "./panel.js";
 import { propagate } from "./propagate.js";
+import { acceptProposal, cycleProposal, highlighted, rejectProposal, shownProposals, wantsTab } from "./proposals.js";
 import { render } from "./render.js";
 import { deleteFrame, submit } from "./submit.js";
 import { setBrush, setOpacity, setTool, toggleMasks, view } from "./tools.js";
@@ -28,6 +30,9 @@ const COMMANDS = {
   },
   removePair,
   clear: clearRegion,
+  acceptProposal: () => acceptProposal(),
+  rejectProposal: () => rejectProposal(),
+  highlightProposal: (key) => cycleProposal(key === "Tab" ? 1 : -1),
   clickTool: () => setTool("click"),
   brush: () => setTool("brush"),
   eraser: () => setTool("eraser"),
@@ -44,6 +49,8 @@ const COMMANDS = {
   propagate,
   deleteFrame,
 };
+// Keys that keep their usual job where their command has nothing to act on: Tab moves the focus.
+const WANTED = { highlightProposal: wantsTab };
 
 document.querySelectorAll("dialog.choices").forEach(keyChoices);  // 1–9 choose a type or a reason
 
@@ -57,6 +64,7 @@ document.addEventListener("keydown", (event) => {
   if (["Enter", " "].includes(event.key) && event.target.closest("button, a")) return;  // let them press
   const shortcut = shortcutFor(event);
   if (!shortcut || (!page.history && shortcut.command !== "submit")) return;
+  if (WANTED[shortcut.command]?.(event) === false) return;
   event.preventDefault();
   COMMANDS[shortcut.command](shortcut.key);
 });
@@ -67,6 +75,11 @@ window.annotator = {
   get pairs() {
     return (page.history?.doc.pairs ?? []).map((p) => ({ id: p.id, illusion: p.illusion?.area ?? 0,
                                                         support: p.support?.area ?? 0, type: p.type ?? null }));
+  },
+  get proposals() {
+    const shown = shownProposals(), chosen = highlighted(shown);
+    return shown.map((p) => ({ id: p.id, source: p.source, score: p.score, type: p.illusion_type,
+                               highlighted: p === chosen }));
   },
   get dirty() { return Boolean(page.session && page.history.doc !== page.session.saved); },
   imageToClient: (x, y) => view.imageToClient(x, y),

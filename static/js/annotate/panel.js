@@ -1,11 +1,12 @@
-// The side panel: region and tool switches, brush and opacity sliders, the planes with their
-// regions and types, and the frame's actions. Its controls act like their keys.
+// The side panel: region and tool switches, brush and opacity sliders, the machine's proposals, the
+// planes with their regions and types, and the frame's actions. Its controls act like their keys.
 import { el } from "../api.js";
 import { addPair, removePair, selectKind, selectPair, setType } from "./editing.js";
 import { checkQueue, stepFrame } from "./lifecycle.js";
 import { regionName } from "./messages.js";
 import { $, page, prefs, root, ui } from "./page.js";
 import { propagate } from "./propagate.js";
+import { acceptProposal, highlighted, highlightProposal, proposalsNote, rejectProposal, shownProposals } from "./proposals.js";
 import * as S from "./state.js";
 import { deleteFrame, submit } from "./submit.js";
 import { setBrush, setOpacity, setTool, view } from "./tools.js";
@@ -22,6 +23,26 @@ export function renderPanel(doc) {
   $("submit").replaceChildren(page.frame && locked ? "Next from the queue " : "Submit ", el("kbd", {}, "Enter"));
   $("submit").disabled = !page.frame && root.dataset.state !== "empty";
   $("pairs").replaceChildren(...(doc?.pairs ?? []).map((p, i) => pairRow(p, i + 1)));
+  const shown = shownProposals(), chosen = highlighted(shown);
+  $("proposals-section").hidden = locked;
+  $("proposals-note").textContent = proposalsNote(shown);
+  $("proposals").replaceChildren(...shown.map((p) => proposalRow(p, p === chosen)));
+}
+
+// A proposal's row: where it comes from, its score and type guess, and its two decisions (with their
+// keys on the highlighted one, which the keys act on).
+function proposalRow(p, chosen) {
+  const key = (k) => (chosen ? el("kbd", {}, k) : "");
+  return el("li", { className: "proposal", dataset: { proposal: p.id }, ariaCurrent: String(chosen),
+                    title: chosen ? "Highlighted: the keys act on it (Tab: the next one)" : "Click to highlight it" },
+  el("span", { className: "source" }, p.source),
+  el("span", { className: "score", title: "The proposer's confidence, 0–1" }, p.score.toFixed(2)),
+  el("span", { className: "type", dataset: { guessed: p.illusion_type ? "yes" : "no" } }, p.illusion_type ?? "type?"),
+  el("span", { className: "decide" },
+    el("button", { type: "button", dataset: { decide: "accept" }, title: "Accept: a plane with its masks, to correct with clicks (a)" },
+       "Accept", key("A")),
+    el("button", { type: "button", className: "ghost", dataset: { decide: "reject" }, title: "Reject: not an illusion (r)" },
+       "Reject", key("R"))));
 }
 
 // A plane's row: its number (see planeName), its two regions as chips, its own type, remove.
@@ -75,6 +96,15 @@ export function listenPanel() {
   onClick("submit", submit);
   onClick("delete", deleteFrame);
   onClick("check-again", checkQueue);
+  onClick("proposals", (event) => {
+    const row = event.target.closest("[data-proposal]");
+    if (!row) return;
+    const id = Number(row.dataset.proposal);
+    const decide = event.target.closest("[data-decide]")?.dataset.decide;
+    if (decide === "accept") return acceptProposal(id);
+    if (decide === "reject") return rejectProposal(id);
+    highlightProposal(id);
+  });
   onClick("pairs", (event) => {
     const row = event.target.closest("[data-pair]");
     if (!row) return;

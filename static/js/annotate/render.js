@@ -1,8 +1,9 @@
 // One redraw of the page from its state: every plane's masks on the canvas (the one being brushed
-// as it is painted), the current region's clicks and box, then the panel.
+// as it is painted), the proposals on show, the current region's clicks and box, then the panel.
 import { Layer } from "./layers.js";
 import { current, page, prefs, root, ui } from "./page.js";
 import { renderPanel } from "./panel.js";
+import { proposalOutlines } from "./proposals.js";
 import { fromRuns } from "./rle.js";
 import * as S from "./state.js";
 import { view } from "./tools.js";
@@ -16,6 +17,7 @@ export function render() {
   scene.opacity = prefs.opacity;
   scene.hidden = ui.hidden;
   scene.layers = [];
+  scene.proposals = [];
   scene.points = [];
   scene.box = null;
   if (doc) {
@@ -26,6 +28,7 @@ export function render() {
         else if (p[kind]?.area) scene.layers.push({ layer: layerOf(p.id, kind, p[kind].runs), active });
       }
     }
+    scene.proposals = proposalOutlines();
     const r = current();
     scene.points = r?.points ?? [];
     scene.box = r?.box ?? null;

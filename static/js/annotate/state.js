@@ -3,7 +3,8 @@
 // doc    = { pairs: [{ id, type: "picture" | … | null, illusion: Region | null, support: Region | null }] }
 //          (the illusion type belongs to each pair: a frame can hold a picture and a mirror)
 // Region = { runs: COCO runs (column-major) | null, area, points: [{x, y, label}], box: [x0, y0, x1, y1] | null,
-//            extra: other click entries kept as they came (e.g. {propagated_from}), stale: mask lags the clicks }
+//            extra: other click entries kept as they came (e.g. {propagated_from}, {proposal_id}),
+//            stale: mask lags the clicks }
 // Every change makes a new doc that shares what did not change, so history is a list of docs and costs
 // little, and "unchanged since the last save" is an identity check.
 import { encodeCounts, runsOf, areaOf } from "./rle.js";
@@ -36,6 +37,21 @@ export function addPair(doc, type = null) {
   const id = Math.max(0, ...doc.pairs.map((p) => p.id)) + 1;
   return [{ ...doc, pairs: [...doc.pairs, { id, type, illusion: null, support: null }] }, id];
 }
+
+// Gives a plane its masks and type (`fields`: { type, illusion, support }): the pair `pairId` when it
+// holds nothing yet (a new frame's empty pair, a plane just added), else a new pair; [doc, its id].
+// A null type keeps the pair's.
+export function putPair(doc, pairId, fields) {
+  const target = pairOf(doc, pairId);
+  const [base, id] = target && isEmpty(target) ? [doc, pairId] : addPair(doc);
+  return [{ ...base, pairs: base.pairs.map((p) => (p.id === id ? { ...p, ...fields, type: fields.type ?? p.type } : p)) }, id];
+}
+
+const isEmpty = (pair) => KINDS.every((k) => !pair[k] || (!pair[k].area && !pair[k].points.length && !pair[k].box));
+
+// The ids of the proposals the document's regions came from (their {proposal_id} click entries).
+export const proposalsIn = (doc) => new Set(doc.pairs.flatMap((p) => KINDS.flatMap((k) => p[k]?.extra ?? []))
+  .map((entry) => entry?.proposal_id).filter(Number.isInteger));
 
 export function removePair(doc, pairId) {
   const pairs = doc.pairs.filter((p) => p.id !== pairId);
