@@ -90,7 +90,8 @@ EXPECTED: dict[str, Role | None] = {
     "evaluations.sample": Role.curator,
     "evaluations.sample_image": Role.curator,
 }
-SAMPLE_ARGS = {"user_id": "1", "job_id": "1", "frame_id": "1", "sample_id": "1", "proposal_id": "1", "view": "anaglyph", "asset": "index.html",
+SAMPLE_ARGS = {"user_id": "1", "job_id": "1", "frame_id": "1", "sample_id": "1", "proposal_id": "1",
+               "view": "anaglyph", "asset": "index.html",
                "key": "ab/cd/" + "ab" * 32 + ".png", "run_id": "1", "name": "best.pt",
                "evaluation_id": "1", "method": "fusion", "image": "error"}
 CALLERS = ["anonymous", *(r.value for r in Role)]
