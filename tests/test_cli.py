@@ -88,8 +88,9 @@ def test_demo_without_serving_builds_a_complete_workspace(tmp_path: Path) -> Non
     assert result.returncode == 0, result.stderr
     for role in ("annotator", "curator", "admin"):
         assert f"{role}-demo" in result.stdout
-    # an ingest and a prefilter job per video, then a generation job per annotated frame
-    assert "4 of 4 jobs succeeded" in result.stdout and "6 of 6 jobs succeeded" in result.stdout
+    # an ingest and a prefilter job per video, then a generation job per annotated frame and one propose
+    # job for the approved frames left to annotate
+    assert "4 of 4 jobs succeeded" in result.stdout and "7 of 7 jobs succeeded" in result.stdout
     frames = json.loads(cli("--data-dir", str(home), "frames", "list", "--json").stdout)
     states = [f["state"] for f in frames]
     assert len(frames) == 28
