@@ -202,3 +202,23 @@ def test_a_queue_that_is_down_does_not_stop_approvals(client, tokens, scene, run
     with runtime.sessions() as s:
         [job] = s.scalars(select(Job).where(Job.kind == "propose")).all()
     assert len(job.params["frame_ids"]) >= 1
+
+
+def test_odd_proposal_ids_are_refused_or_ignored(client, tokens, scene, runtime) -> None:  # type: ignore[no-untyped-def]
+    ids = _approve_all(client, tokens, runtime)
+    job_service.run_queued_jobs(HANDLERS, runtime)
+    for odd in ("99999999999999999999", "-1", "1.5", "NaN", "%2Ftmp%2Fx.pt"):
+        answer = client.post(f"/api/v1/frames/{ids[0]}/proposals/{odd}/reject", headers=auth(tokens))
+        assert answer.status_code == 404, odd
+    # In a submitted region's clicks a link that is no integer id of this frame is no link: nothing breaks.
+    links = [{"proposal_id": v} for v in ("1", 1.0, True, 2**70, None, "/etc/passwd")]
+    regions = _pair(1, truth(scene, 0, "illusion_00"), truth(scene, 0, "support_00"))
+    for region in regions:
+        region["clicks"] = links
+    _submit(client, tokens, ids[0], regions)
+    fates = {p["fate"] for p in client.get(f"/api/v1/frames/{ids[0]}", headers=auth(tokens)).json["proposals"]}
+    assert fates == {"rejected"}
+    # A submitted frame's proposals are decided: rejecting one now is a conflict with a reason.
+    first = client.get(f"/api/v1/frames/{ids[0]}", headers=auth(tokens)).json["proposals"][0]
+    late = client.post(f"/api/v1/frames/{ids[0]}/proposals/{first['id']}/reject", headers=auth(tokens))
+    assert late.status_code == 409 and "annotated" in late.json["error"]
