@@ -6,7 +6,8 @@ to the stereo working resolution (the role of the paper's VAE decoder), concaten
 cost volume sampled around the stereo disparity, and convolutions with a sigmoid give I_c.
 
 It trains end to end through the K unrolled steps. With ``use_vlm`` off the flow is skipped and
-the decoder input is the left view's matching features (the paper's "PF" ablation).
+the decoder input is the left view's matching features (the paper's "PF" ablation); with
+``confidence_image_features`` (``lite``) the head sees those features beside the flow's state.
 """
 
 from __future__ import annotations
@@ -113,15 +114,20 @@ class ConfidenceHead(nn.Module):
         self.use_vlm, self.steps = config.use_vlm, config.flow_steps
         self.token_factor = 2 ** (config.token_downsample - config.n_downsample)
         dim = config.confidence_dim
+        # Image features beside the flow's state: the decoder of the no-VLM network (named as there),
+        # or a second input of the VLM network's head with ``confidence_image_features``.
+        self.image: nn.Module | None = None
         if self.use_vlm:
             self.connector = nn.Linear(condition_dim, config.flow_dim)
             self.velocity = VelocityField(config)
             self.latent = config.flow_latent
             self.decoder = Decoder(config.flow_latent, dim, config.token_downsample - config.n_downsample)
+            if config.confidence_image_features:
+                self.image = _feature_encoder(config.feature_dim, dim)
         else:
-            self.decoder = nn.Sequential(nn.Conv2d(config.feature_dim, dim, 3, padding=1), nn.ReLU(inplace=True))
-        corr_channels = config.corr_levels * (2 * config.corr_radius + 1)
-        self.head = nn.Sequential(nn.Conv2d(dim + corr_channels, dim, 3, padding=1), nn.ReLU(inplace=True),
+            self.decoder = _feature_encoder(config.feature_dim, dim)
+        inputs = dim * (2 if self.image is not None else 1) + config.corr_levels * (2 * config.corr_radius + 1)
+        self.head = nn.Sequential(nn.Conv2d(inputs, dim, 3, padding=1), nn.ReLU(inplace=True),
                                   nn.Conv2d(dim, dim, 3, padding=1), nn.ReLU(inplace=True),
                                   nn.Conv2d(dim, 1, 1))
 
@@ -139,13 +145,21 @@ class ConfidenceHead(nn.Module):
     def forward(self, cost: Tensor, *, vlm: VlmResult | None = None, features: Tensor | None = None,
                 noise: torch.Generator | Sequence[torch.Generator] | None = None) -> Tensor:
         """Confidence logits B×1×h×w. ``cost``: B×corr×h×w correlations sampled around D_s;
-        ``vlm`` (use_vlm) or ``features`` (left matching features, without the VLM)."""
+        ``vlm`` (use_vlm) and/or ``features`` (B×feature_dim×h×w left matching features: without
+        the VLM, or with ``confidence_image_features``)."""
         height, width = cost.shape[2:]
         if self.use_vlm:
             assert vlm is not None
             grid = (height // self.token_factor, width // self.token_factor)
-            decoded = self.decoder(self.flow(vlm, grid, noise))
+            decoded = [self.decoder(self.flow(vlm, grid, noise))]
+            if self.image is not None:
+                assert features is not None
+                decoded.append(self.image(features))
         else:
             assert features is not None
-            decoded = self.decoder(features)
-        return self.head(torch.cat([decoded, cost], dim=1))
+            decoded = [self.decoder(features)]
+        return self.head(torch.cat([*decoded, cost], dim=1))
+
+
+def _feature_encoder(in_channels: int, out_channels: int) -> nn.Module:
+    return nn.Sequential(nn.Conv2d(in_channels, out_channels, 3, padding=1), nn.ReLU(inplace=True))

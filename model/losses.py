@@ -3,7 +3,10 @@
 L_d = Σ_t γ^(T+2−t)·|D_s^t − D_G|₁ + γ·|D̃_m − D_G|₁ + |D_f − D_G|₁, with γ adjusted as the
 authors' code does, γ^(15/(T−1)) for T > 1 (γ itself for T = 1). L_c is the focal loss on I_c,
 α_c·(1 − e^(−L_b))^γ_c·L_b with L_b the binary cross entropy against
-1[bilinear-downsampled |D_G − D_s^T| < 1.25] at the confidence map's resolution.
+1[bilinear-downsampled |D_G − D_s^T| < 1.25] at the confidence map's resolution (the authors'
+target, ``train.confidence_target = "threshold"``). ``"closer"`` (``lite``) trusts the stereo also
+where it is no farther from D_G than the aligned mono D̃_m: the threshold alone sends every pixel
+the stereo misses by 1.25 px to the mono, which a coarse relative estimate misses by more.
 
 Only valid pixels with ground truth below ``max_disparity`` count. Every term is a SUM over
 this rank's pixels divided by ``valid_total``, the valid-pixel count summed over all ranks (the
@@ -30,15 +33,23 @@ def sequence_gamma(gamma: float, iterations: int) -> float:
     return gamma ** (15 / (iterations - 1)) if iterations > 1 else gamma
 
 
-def confidence_target(error: Tensor, valid: Tensor, size: tuple[int, int]) -> tuple[Tensor, Tensor]:
+def confidence_target(error: Tensor, valid: Tensor, size: tuple[int, int],
+                      mono_error: Tensor | None = None) -> tuple[Tensor, Tensor]:
     """(target, valid) at ``size``: the full-resolution |D_G − D_s^T| (B×1×H×W pixels, invalid
-    pixels ignored) downsampled bilinearly, < 1.25 → 1; a low-resolution pixel is valid where
-    most of what it samples is."""
+    pixels ignored) downsampled bilinearly, < 1.25 → 1; with ``mono_error`` (|D_G − D̃_m|, alike)
+    also 1 where the stereo is no farther from the truth than the aligned mono. A low-resolution
+    pixel is valid where most of what it samples is."""
     valid_f = valid.float()
     weight = F.interpolate(valid_f, size, mode="bilinear", align_corners=False)
-    summed = F.interpolate(error * valid_f, size, mode="bilinear", align_corners=False)
-    low_error = summed / weight.clamp_min(1e-6)
-    return (low_error < CONFIDENT_ERROR_PX).float(), weight > 0.5
+
+    def low(full: Tensor) -> Tensor:
+        return F.interpolate(full * valid_f, size, mode="bilinear", align_corners=False) / weight.clamp_min(1e-6)
+
+    stereo_error = low(error)
+    confident = stereo_error < CONFIDENT_ERROR_PX
+    if mono_error is not None:
+        confident |= stereo_error <= low(mono_error)
+    return confident.float(), weight > 0.5
 
 
 def focal_terms(logits: Tensor, target: Tensor, alpha: float, gamma: float) -> Tensor:
@@ -75,7 +86,8 @@ def fusion_loss(out: FusionOutput, gt: Tensor, valid: Tensor, cfg: TrainConfig, 
         final = l1(out.disparity)
         size = out.confidence_logits.shape[2:]
         error = (gt - out.stereo.detach()).abs()
-        target, valid_low = confidence_target(error, mask, size)
+        mono_error = (gt - out.mono_aligned.detach()).abs() if cfg.confidence_target == "closer" else None
+        target, valid_low = confidence_target(error, mask, size, mono_error)
         area = (size[0] * size[1]) / (gt.shape[2] * gt.shape[3])
         terms = focal_terms(out.confidence_logits, target, cfg.focal_alpha, cfg.focal_gamma)
         confidence = cfg.focal_weight * (terms * valid_low).sum() / (total * area)

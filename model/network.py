@@ -77,7 +77,7 @@ class FusionNetwork(nn.Module):
         cost = stereo.corr.lookup(disparity_low.detach())
         if self.vlm is not None:
             vlm = self.vlm(left_n, stereo.iterates[-1], mono_result.disparity)
-            logits = self.confidence(cost, vlm=vlm, noise=noise)
+            logits = self.confidence(cost, vlm=vlm, features=stereo.left_features, noise=noise)
         else:
             logits = self.confidence(cost, features=stereo.left_features)
         confidence = torch.sigmoid(logits)

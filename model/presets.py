@@ -23,6 +23,7 @@ PRESET_DIR = Path(__file__).parent / "presets"
 MonoBackend = Literal["precomputed", "depth-anything-v2"]
 VlmBackend = Literal["lite", "qwen2-vl"]
 FusionRule = Literal["paper", "released"]
+ConfidenceTarget = Literal["threshold", "closer"]
 
 
 @dataclass(frozen=True)
@@ -55,6 +56,10 @@ class ModelConfig:
     vlm_depth: int = 2
     vlm_patch: int = 32  # lite encoder patch side, pixels
     use_vlm: bool = True  # False: confidence from image features alone (the paper's PF ablation)
+    # True: the confidence decoder sees the left view's matching features beside the flow's decoded
+    # state (lite: its VLM is trained from scratch on a few dozen samples, and its 1/32 tokens alone
+    # cannot place a mirror's edge at 1/8). False: the flow's state alone, as the paper.
+    confidence_image_features: bool = False
     # False: a stereo-only network (`bench fusion --ablations`' stereo_only): the stereo branch alone,
     # its context encoder fed a constant for the mono input; no confidence or fusion; the output is its last iterate.
     use_mono: bool = True
@@ -123,6 +128,9 @@ class TrainConfig:
     focal_alpha: float = 0.25
     focal_gamma: float = 2.0
     focal_weight: float = 1.0
+    # The confidence's target: "threshold", the authors' 1[|D_G − D_s| < 1.25 px]; "closer" also
+    # trusts the stereo where it is no farther from D_G than the aligned mono (model/losses.py).
+    confidence_target: ConfidenceTarget = "threshold"
     val_every: int = 250
     checkpoint_every: int = 250
     keep_last: int = 3

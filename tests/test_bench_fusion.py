@@ -106,16 +106,21 @@ class _Closed:
 
 
 def test_report_carries_every_method_and_the_timings(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """run_fusion_bench end to end with untrained networks in place of training and one frame per seed."""
-    trained: list[tuple[int, str]] = []
+    """run_fusion_bench end to end with untrained networks in place of training and one frame per seed:
+    every run launched before any trains, the trainings run by ``workers`` at once."""
+    launched: list[tuple[int, str]] = []
+    checkpoints: dict[int, Path] = {}
+    drained: list[int] = []
 
-    def untrained(_rt: Any, seed: int, steps: int, network: fusion.Network) -> tuple[int, Path, float]:
+    def untrained(_rt: Any, seed: int, steps: int, network: fusion.Network) -> int:
+        assert not drained, "a run launched after the trainings ran"
         torch.manual_seed(seed)
         config = load_preset("lite", fusion.network_overrides(network, steps))
         path = tmp_path / f"{network.name}-{seed}.pt"
         save_checkpoint(path, FusionNetwork(config.model), config, step=0)
-        trained.append((seed, network.name))
-        return len(trained), path, 0.5
+        launched.append((seed, network.name))
+        checkpoints[len(launched)] = path
+        return len(launched)
 
     rendered: list[tuple[int, ...]] = []
     render = fusion.test_samples
@@ -126,11 +131,14 @@ def test_report_carries_every_method_and_the_timings(tmp_path: Path, monkeypatch
 
     monkeypatch.setattr(fusion, "prepared_workspace", lambda _home: (_Closed(), True))
     monkeypatch.setattr(fusion, "training_disparity_range", lambda _rt: [0.0, TRAIN_P99_PX])
-    monkeypatch.setattr(fusion, "_train", untrained)
+    monkeypatch.setattr(fusion, "_launch", untrained)
+    monkeypatch.setattr(fusion, "_run_jobs", lambda _rt, workers: drained.append(workers))
+    monkeypatch.setattr(fusion, "_trained", lambda _rt, run_id: (checkpoints[run_id], 0.5 * run_id))
     monkeypatch.setattr(fusion, "test_samples", one_frame)
-    report = fusion.run_fusion_bench(tmp_path, seeds=2, steps=20, ablations=True, split="val")
+    report = fusion.run_fusion_bench(tmp_path, seeds=2, steps=20, ablations=True, split="val", workers=2)
     assert rendered == [fusion.VAL_SEEDS]
-    assert trained == [(s, n) for s in (0, 1) for n in ("fusion", "no_vlm", "stereo_only")]
+    assert launched == [(s, n) for s in (0, 1) for n in ("fusion", "no_vlm", "stereo_only")]
+    assert drained == [2] and report["workers"] == 2
     methods = report["methods"]
     assert list(methods) == ["fusion", "stereo", "fusion_no_vlm", "stereo_only", "mono_gt_align", "sgbm"]
     for method, regions in methods.items():
@@ -142,8 +150,8 @@ def test_report_carries_every_method_and_the_timings(tmp_path: Path, monkeypatch
     # two seeds of fresh networks differ; the untrained baselines are scored once
     assert methods["fusion"]["all"]["epe_spread"] > 0
     timings = report["timings_s"]
-    assert set(timings) == {"prepare", "render_pairs", "score_baselines", "train", "score", "total"}
-    assert timings["train"] == {"fusion": [0.5, 0.5], "no_vlm": [0.5, 0.5], "stereo_only": [0.5, 0.5]}
+    assert set(timings) == {"prepare", "render_pairs", "score_baselines", "train", "train_wall", "score", "total"}
+    assert timings["train"] == {"fusion": [0.5, 2.0], "no_vlm": [1.0, 2.5], "stereo_only": [1.5, 3.0]}
     assert all(len(v) == 2 and min(v) > 0 for v in timings["score"].values())
     assert report["pairs"]["split"] == "val" and report["pairs"]["seeds"] == list(fusion.VAL_SEEDS)
     assert report["runs"] == [{"seed": 0, "fusion": 1, "no_vlm": 2, "stereo_only": 3},
@@ -164,7 +172,8 @@ def test_cli_passes_ablations_and_split(monkeypatch: pytest.MonkeyPatch) -> None
     monkeypatch.setattr(fusion, "run_fusion_bench", lambda work_dir, **kw: calls.append(kw) or {"ok": 1})
     result = CliRunner().invoke(main, ["bench", "fusion", "--json", "--ablations", "--split", "val", "--steps", "20"])
     assert result.exit_code == 0, result.output
-    assert calls == [{"seeds": 1, "steps": 20, "ablations": True, "split": "val"}]
-    result = CliRunner().invoke(main, ["bench", "fusion", "--mono-only", "--ablations"])
-    assert result.exit_code == 2 and "--ablations" in result.output
+    assert calls == [{"seeds": 1, "steps": 20, "ablations": True, "split": "val", "workers": 1}]
+    for flags in (["--ablations"], ["--workers", "2"]):
+        result = CliRunner().invoke(main, ["bench", "fusion", "--mono-only", *flags])
+        assert result.exit_code == 2 and "--mono-only" in result.output, flags
     assert CliRunner().invoke(main, ["bench", "fusion", "--split", "train"]).exit_code == 2

@@ -137,3 +137,31 @@ def test_reaper_marks_jobs_of_dead_workers(runtime: Runtime) -> None:
         assert job_service.reap_lost_jobs(s) == [job.id]
     with transaction(runtime.sessions) as s:
         assert job_service.mark_for_retry(s, job.id).state == JobState.queued
+
+
+def test_run_queued_jobs_with_two_workers_runs_jobs_side_by_side(rt: Runtime) -> None:
+    """Two threads each take a job; a job queued by one of them runs too; every job is listed once
+    (known kinds, run by the test's own handlers)."""
+    spans: dict[int, tuple[float, float]] = {}
+
+    def slow(ctx: job_service.JobContext) -> dict[str, int]:
+        started = time.monotonic()
+        time.sleep(0.4)
+        if ctx.params.get("chain"):
+            with transaction(ctx.sessions) as s:
+                rt.submit(s, "ingest", {}, None)
+        spans[ctx.job_id] = (started, time.monotonic())
+        return {}
+
+    def broken(_ctx: job_service.JobContext) -> dict[str, int]:
+        raise ValueError("bad input")
+
+    with transaction(rt.sessions) as s:
+        first, second = (rt.submit(s, "ingest", {"chain": chain}, None).id for chain in (True, False))
+        failing = rt.submit(s, "generate", {}, None).id
+    results = job_service.run_queued_jobs({"ingest": slow, "generate": broken}, rt, workers=2)
+    assert sorted(results) == [(first, JobState.succeeded), (second, JobState.succeeded),
+                               (failing, JobState.failed), (failing + 1, JobState.succeeded)]
+    assert len(results) == 4
+    (a_start, a_end), (b_start, b_end) = spans[first], spans[second]
+    assert a_start < b_end and b_start < a_end, "the two first jobs did not overlap"

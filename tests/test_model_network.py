@@ -13,7 +13,7 @@ torch = pytest.importorskip("torch")
 
 from model.checkpoint import load_checkpoint, load_network, save_checkpoint  # noqa: E402
 from model.fusion import refine_affine  # noqa: E402
-from model.losses import fusion_loss, sequence_gamma  # noqa: E402
+from model.losses import confidence_target, focal_terms, fusion_loss, sequence_gamma  # noqa: E402
 from model.network import FusionNetwork, FusionOutput  # noqa: E402
 from model.predictor import Predictor  # noqa: E402
 from model.presets import PRESETS, Config, load_preset  # noqa: E402
@@ -105,6 +105,27 @@ def test_refining_affine_parameters_pools_confident_neighbours() -> None:
     assert torch.allclose(glob, torch.tensor([[[[1.0, mean, 3.0, mean]]]]))
 
 
+@pytest.mark.parametrize(("target", "expected"), [("threshold", [1.0, 0.0, 0.0]), ("closer", [1.0, 1.0, 0.0])])
+def test_the_confidence_target_trusts_the_stereo_where_it_is_closer_than_the_mono(target: str,
+                                                                                 expected: list[float]) -> None:
+    """Three 2×2 blocks (one confidence pixel each): the stereo misses by 1, 2, 2 px, the aligned mono
+    by 3, 3, 1 px. The authors' threshold trusts the first block alone; "closer" the first two."""
+    cfg = load_preset("lite", {"confidence_target": target}).train
+    gt = torch.full((1, 1, 2, 6), 10.0)
+    stereo = gt + torch.tensor([1.0, 1.0, 2.0, 2.0, 2.0, 2.0])
+    aligned = gt - torch.tensor([3.0, 3.0, 3.0, 3.0, 1.0, 1.0])
+    valid = torch.ones_like(gt, dtype=torch.bool)
+    mono_error = (gt - aligned).abs() if target == "closer" else None
+    low, low_valid = confidence_target((gt - stereo).abs(), valid, (1, 3), mono_error)
+    assert low.flatten().tolist() == expected and bool(low_valid.all())
+    logits = torch.full((1, 1, 1, 3), 2.0)
+    out = FusionOutput(gt, [stereo], stereo, aligned, torch.sigmoid(logits), logits, gt)
+    _, parts = fusion_loss(out, gt, valid, cfg)
+    focal = focal_terms(logits, torch.tensor(expected).view(1, 1, 1, 3), cfg.focal_alpha, cfg.focal_gamma)
+    assert math.isclose(parts["confidence"], float(focal.sum()) / (12 * 3 / 12), rel_tol=1e-5)
+    assert load_preset("paper").train.confidence_target == "threshold"  # the authors' target stays the paper's
+
+
 def test_the_loss_equals_a_hand_computation() -> None:
     cfg = load_preset("lite").train
     gt = torch.tensor([[[[1.0, 2.0, 800.0, 4.0]] * 2]])  # 1×1×2×4; 800 > max_disparity: ignored
@@ -132,7 +153,8 @@ def test_the_loss_equals_a_hand_computation() -> None:
     assert sequence_gamma(0.9, 1) == 0.9 and math.isclose(sequence_gamma(0.9, 16), 0.9)
 
 
-@pytest.mark.parametrize("overrides", [{}, {"use_vlm": False}, {"fusion_rule": "released"}])
+@pytest.mark.parametrize("overrides", [{}, {"use_vlm": False}, {"confidence_image_features": False},
+                                       {"fusion_rule": "released"}])
 def test_gradients_reach_every_trainable_parameter(overrides: dict) -> None:
     config = load_preset("lite", {**SMALL, **overrides})
     torch.manual_seed(0)

@@ -12,6 +12,7 @@ import socket
 import time
 import traceback
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from datetime import timedelta
 from typing import Any, Protocol
@@ -239,16 +240,33 @@ def _finish(sessions: sessionmaker[Session], job_id: int, me: str, **values: Any
         return s.get(Job, job_id).state
 
 
-def run_queued_jobs(handlers: dict[str, Handler], env: JobEnv) -> list[tuple[int, JobState]]:
-    """Run every queued job in this process, oldest first, including jobs they queue; then return.
+def run_queued_jobs(handlers: dict[str, Handler], env: JobEnv, *, workers: int = 1) -> list[tuple[int, JobState]]:
+    """Run every queued job in this process, oldest first, including jobs they queue; then return
+    each job it took with its final state, in the order taken.
 
-    The database is the source of truth, so this works without the queue: a worker that later
-    receives the same ids finds them finished and does nothing.
+    ``workers`` threads take jobs at once (a training job's work runs in processes of its own, so
+    two threads train two runs side by side). The database is the source of truth, so this works
+    without the queue: a worker that later receives the same ids finds them finished and does nothing.
     """
-    ran = []
-    while True:
-        with env.sessions() as s:
-            job_id = s.scalar(select(Job.id).where(Job.state == JobState.queued).order_by(Job.id).limit(1))
-        if job_id is None:
-            return ran
-        ran.append((job_id, execute_job(job_id, handlers, env)))
+    taken: list[int] = []
+
+    def drain() -> None:
+        while True:
+            with env.sessions() as s:
+                job_id = s.scalar(select(Job.id).where(Job.state == JobState.queued).order_by(Job.id).limit(1))
+            if job_id is None:
+                return
+            execute_job(job_id, handlers, env)
+            taken.append(job_id)
+
+    if workers == 1:
+        drain()
+    else:
+        with ThreadPoolExecutor(workers, thread_name_prefix="jobs") as pool:
+            for future in [pool.submit(drain) for _ in range(workers)]:
+                future.result()
+    # Final states from the rows: of two threads that raced for one job, the loser saw it running.
+    ids = list(dict.fromkeys(taken))
+    with env.sessions() as s:
+        states = {job_id: state for job_id, state in s.execute(select(Job.id, Job.state).where(Job.id.in_(ids)))}
+    return [(job_id, states[job_id]) for job_id in ids]

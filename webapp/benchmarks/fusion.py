@@ -33,7 +33,7 @@ from sqlalchemy import select
 
 from dataset.capture.synthetic import import_rendered_video
 from dataset.db import transaction
-from dataset.models import Frame, FrameState, JobState, Role, User
+from dataset.models import Frame, FrameState, Job, JobState, Role, TrainingRun, User
 from dataset.readers import StereoSample
 from dataset.readers.base import make_regions
 from dataset.readers.version import VersionReader, pin_dataset_version
@@ -89,11 +89,12 @@ ABLATIONS = (Network("no_vlm", {"model.use_vlm": False}, {"fusion_no_vlm": "fusi
 
 
 def run_fusion_bench(work_dir: Path, *, seeds: int = 1, steps: int = DEFAULT_STEPS, ablations: bool = False,
-                     split: str = "test") -> dict[str, Any]:
+                     split: str = "test", workers: int = 1) -> dict[str, Any]:
     """Prepare (or reuse) the data in ``work_dir``, train per seed the fusion network (and, with
-    ``ablations``, the no-VLM and stereo-only ones) and score every method on the held-out pairs of
-    ``split`` (SPLITS). Returns per method and region the mean (and spread over seeds) of EPE and
-    bad-2, the disparity ranges of training and the pairs, and the timings (seconds)."""
+    ``ablations``, the no-VLM and stereo-only ones), ``workers`` trainings at a time, and score every
+    method on the held-out pairs of ``split`` (SPLITS). Returns per method and region the mean (and
+    spread over seeds) of EPE and bad-2, the disparity ranges of training and the pairs, and the
+    timings (seconds; a network's training time is its job's, from start to end)."""
     started = time.perf_counter()
     rt, cached = prepared_workspace(work_dir / "workspace")
     prepare_s = time.perf_counter() - started
@@ -103,16 +104,21 @@ def run_fusion_bench(work_dir: Path, *, seeds: int = 1, steps: int = DEFAULT_STE
     timed = time.perf_counter()
     baselines = _score(pairs, build_methods(list(BASELINES), checkpoint=None, predictions=None, mono_dir=None))
     baselines_s = time.perf_counter() - timed
-    runs = [_seed_run(rt, seed, steps, pairs, networks) for seed in range(seeds)]
+    launched = {(seed, network.name): _launch(rt, seed, steps, network) for seed in range(seeds) for network in networks}
+    timed = time.perf_counter()
+    _run_jobs(rt, workers)
+    train_wall_s = time.perf_counter() - timed
+    runs = [_seed_scores(rt, seed, pairs, networks, launched) for seed in range(seeds)]
     rt.close()
     return {
         "methods": {**_aggregate([r["methods"] for r in runs]), **_aggregate([baselines])},
-        "seeds": seeds, "steps": steps, "preset": "lite", "size": f"{SIZE[0]}x{SIZE[1]}",
+        "seeds": seeds, "steps": steps, "preset": "lite", "size": f"{SIZE[0]}x{SIZE[1]}", "workers": workers,
         "networks": {n.name: {"overrides": dict(n.overrides), "methods": list(n.methods)} for n in networks},
         "train_disparity_px": train_range, "pairs": info, "prepare_cached": cached,
         "timings_s": {"prepare": round(prepare_s, 1), "render_pairs": round(render_s, 1),
                       "score_baselines": round(baselines_s, 1),
                       "train": {n.name: [r["networks"][n.name]["train_s"] for r in runs] for n in networks},
+                      "train_wall": round(train_wall_s, 1),
                       "score": {n.name: [r["networks"][n.name]["score_s"] for r in runs] for n in networks},
                       "total": round(time.perf_counter() - started, 1)},
         "runs": [{"seed": r["seed"], **{name: net["run"] for name, net in r["networks"].items()}} for r in runs],
@@ -171,10 +177,11 @@ def prepared_workspace(home: Path) -> tuple[Runtime, bool]:
     return rt, False
 
 
-def _run_jobs(rt: Runtime) -> None:
-    failed = [job_id for job_id, state in job_service.run_queued_jobs(HANDLERS, rt) if state != JobState.succeeded]
+def _run_jobs(rt: Runtime, workers: int = 1) -> None:
+    ran = job_service.run_queued_jobs(HANDLERS, rt, workers=workers)
+    failed = [job_id for job_id, state in ran if state != JobState.succeeded]
     if failed:
-        raise RuntimeError(f"benchmark preparation: jobs {failed} did not succeed (`illusion-studio jobs show ID`)")
+        raise RuntimeError(f"benchmark: jobs {failed} did not succeed (`illusion-studio jobs show ID`)")
 
 
 def training_disparity_range(rt: Runtime) -> list[float]:
@@ -231,14 +238,15 @@ def mono_figures(samples: list[StereoSample]) -> dict[str, dict[str, float]]:
     return {r: {k: round(v, 3) for k, v in f.items()} for r, f in figures["mono_gt_align"].items()}
 
 
-def _seed_run(rt: Runtime, seed: int, steps: int, pairs: list[StereoSample],
-              networks: tuple[Network, ...]) -> dict[str, Any]:
-    """Each of ``networks`` trained with ``seed`` and scored on ``pairs``: their figures by report key,
-    and per network its run id and the seconds its training and its scoring took."""
+def _seed_scores(rt: Runtime, seed: int, pairs: list[StereoSample], networks: tuple[Network, ...],
+                 launched: Mapping[tuple[int, str], int]) -> dict[str, Any]:
+    """Each of ``networks``, trained with ``seed`` (its run id in ``launched``), scored on ``pairs``: their
+    figures by report key, and per network its run id and the seconds its training and its scoring took."""
     figures: dict[str, Any] = {}
     timings: dict[str, dict[str, Any]] = {}
     for network in networks:
-        run_id, checkpoint, train_s = _train(rt, seed, steps, network)
+        run_id = launched[seed, network.name]
+        checkpoint, train_s = _trained(rt, run_id)
         started = time.perf_counter()
         built = build_methods(sorted(set(network.methods.values())), checkpoint=checkpoint, predictions=None,
                               mono_dir=None)
@@ -253,18 +261,22 @@ def network_overrides(network: Network, steps: int) -> dict[str, Any]:
     return {**TRAIN_OVERRIDES, "train.steps": steps, **network.overrides}
 
 
-def _train(rt: Runtime, seed: int, steps: int, network: Network) -> tuple[int, Path, float]:
-    """Train ``network`` through the product's training job: (run id, best checkpoint, seconds)."""
+def _launch(rt: Runtime, seed: int, steps: int, network: Network) -> int:
+    """Queue ``network``'s training with ``seed`` through the product's training job: its run id."""
     with transaction(rt.sessions) as s:
         admin = s.scalar(select(User).where(User.name == "bench-admin"))
         run = run_control.launch(
             rt, s, preset="lite", overrides=network_overrides(network, steps), selection=training.DataSelection(),
             launch=training.Launch(split=training.parse_split(SPLIT), seed=seed), user=admin)
-        run_id = run.id
-    started = time.perf_counter()
-    _run_jobs(rt)
-    train_s = time.perf_counter() - started
-    return run_id, training.run_dir(rt.settings.runs_dir, run_id) / "checkpoints" / "best.pt", train_s
+        return run.id
+
+
+def _trained(rt: Runtime, run_id: int) -> tuple[Path, float]:
+    """A finished run's best checkpoint and the seconds its training job ran."""
+    with rt.sessions() as s:
+        job = s.get(Job, s.get(TrainingRun, run_id).job_id)
+        seconds = (job.finished_at - job.started_at).total_seconds()
+    return training.run_dir(rt.settings.runs_dir, run_id) / "checkpoints" / "best.pt", seconds
 
 
 def _score(pairs: list[StereoSample], methods: dict[str, Predict]) -> dict[str, dict[str, dict[str, float]]]:

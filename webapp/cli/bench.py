@@ -175,20 +175,23 @@ def model_benchmark(as_json: bool, repeats: int, train_steps: int) -> None:
               help="Per seed, also train the no-VLM network (use_vlm = false) and the stereo-only one (use_mono = false).")
 @click.option("--split", type=click.Choice(["test", "val"]), default="test", show_default=True,
               help="The held-out pairs scored: val (seeds of its own) to decide on, test once, at the end.")
+@click.option("--workers", type=click.IntRange(1, 64), default=1, show_default=True,
+              help="Trainings run side by side (each one process; give each a core: OMP_NUM_THREADS=1 on 2 cores).")
 def fusion_benchmark(as_json: bool, seeds: int, steps: int | None, work_dir: Path, mono_only: bool,
-                     ablations: bool, split: str) -> None:
+                     ablations: bool, split: str, workers: int) -> None:
     """The synthetic illusion benchmark: train lite on the product's own samples and rendered captures,
     score fusion, stereo, mono-gt-align and sgbm (with --ablations also fusion_no_vlm and stereo_only)
     on held-out rendered pairs (all, picture, mirror, non-illusion)."""
     from webapp.benchmarks.fusion import DEFAULT_STEPS, run_fusion_bench, run_mono_bench
 
     if mono_only:
-        if ablations:
-            raise click.UsageError("--ablations trains networks and --mono-only trains none: pass one of them")
+        if ablations or workers > 1:
+            raise click.UsageError("--ablations and --workers are about training, and --mono-only trains nothing: "
+                                   "pass one or the other")
         _report(run_mono_bench(work_dir.absolute(), split=split), as_json)
         return
     _report(run_fusion_bench(work_dir.absolute(), seeds=seeds, steps=steps or DEFAULT_STEPS, ablations=ablations,
-                             split=split), as_json)
+                             split=split, workers=workers), as_json)
 
 
 def _report(results: dict[str, object], as_json: bool) -> None:
