@@ -32,7 +32,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{args.run_dir}: no such run directory", file=sys.stderr)
         return EXIT_FAILED
     # Heavy imports after the watch starts, so even a trainer still loading torch stops in time.
-    from model.train.dist import close_world, init_world
+    from model.train.dist import barrier, close_world, init_world
     from model.train.events import append_event
     from model.train.loop import Trainer
     from model.train.spec import read_run
@@ -43,6 +43,9 @@ def main(argv: list[str] | None = None) -> int:
         world = init_world(spec.device)
         trainer = Trainer(spec, world)
         outcome = trainer.run()
+        # Every rank ends its collectives before any tears the group down: gloo aborts a rank
+        # ("terminate called without an active exception") whose peer leaves mid-exchange.
+        barrier(world)
         return EXIT_CODES[outcome.state]
     except Exception as exc:  # the run failed: say why in one line, keep the traceback in the log
         traceback.print_exc()
