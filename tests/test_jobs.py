@@ -8,6 +8,7 @@ import sys
 import time
 from pathlib import Path
 
+from click.testing import CliRunner
 from sqlalchemy import func, select
 
 from dataset.db import transaction
@@ -16,6 +17,7 @@ from dataset.services import jobs as job_service
 from dataset.services.ingest import ingest_params
 from dataset.synthetic import write_synthetic_dataset
 from tests.workers import extra_settings, queue_settings, rt, start_worker, wait_for  # noqa: F401  (fixtures)
+from webapp.cli import main
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime
 
@@ -165,3 +167,11 @@ def test_run_queued_jobs_with_two_workers_runs_jobs_side_by_side(rt: Runtime) ->
     assert len(results) == 4
     (a_start, a_end), (b_start, b_end) = spans[first], spans[second]
     assert a_start < b_end and b_start < a_end, "the two first jobs did not overlap"
+
+
+def test_a_burst_worker_takes_concurrency_jobs_at_once(rt: Runtime, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    calls: list[int] = []
+    monkeypatch.setattr(job_service, "run_queued_jobs", lambda _handlers, _env, *, workers: calls.append(workers) or [])
+    result = CliRunner().invoke(main, ["--data-dir", str(rt.settings.home), "worker", "--burst", "--concurrency", "3"])
+    assert result.exit_code == 0, result.output
+    assert calls == [3]

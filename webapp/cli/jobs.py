@@ -20,7 +20,8 @@ from webapp.jobs import runs as run_control
 @click.command()
 @click.option("--concurrency", default=1, show_default=True, type=click.IntRange(1, 64),
               help="Jobs run at once by this worker (threads). Run more workers for more processes.")
-@click.option("--burst", is_flag=True, help="Run the queued jobs (and those they queue) in this process, then exit.")
+@click.option("--burst", is_flag=True,
+              help="Run the queued jobs (and those they queue) in this process, --concurrency at once, then exit.")
 @click.option("--queue", "queue_name", type=click.Choice(["default", "train"]), default="default", show_default=True,
               help="Which queue to take jobs from: train runs only training jobs, default everything else.")
 @pass_state
@@ -34,7 +35,7 @@ def worker(state: CliState, concurrency: int, burst: bool, queue_name: str) -> N
     if burst:
         from webapp.jobs.handlers import HANDLERS
 
-        results = job_service.run_queued_jobs(HANDLERS, state.runtime)
+        results = job_service.run_queued_jobs(HANDLERS, state.runtime, workers=concurrency)
         for job_id, job_state in results:
             click.echo(f"job {job_id}: {job_state.value}")
         if any(s.value != "succeeded" for _, s in results):
