@@ -7,6 +7,7 @@ module reads the environment; everything else receives a :class:`Settings` insta
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import os
 import re
@@ -50,6 +51,9 @@ class Settings(BaseSettings):
     queue_resend_after_s: float = Field(30.0, gt=0,
                                         description="Workers re-send a queued job whose message is missing this long.")
     media_gc_grace_hours: float = Field(24.0, ge=0, description="`media gc` keeps unreferenced files younger than this.")
+    export_retention_days: float = Field(7.0, ge=0, description="Exports made on the Export page are deleted this long "
+                                                                "after they were asked for; 0 keeps them until a curator "
+                                                                "deletes them.")
     media_root: Path = Field(Path(), description="Content-addressed media store; default <home>/media.")
     host: str = "127.0.0.1"
     port: int = Field(5000, ge=1, le=65535)
@@ -76,6 +80,10 @@ class Settings(BaseSettings):
         "10 per 15 minutes", description="Wrong secrets for one user's API tokens (tokens ist_<id>_<secret> name their "
                                          "user; old ist_<secret> ones only count per address).")
     https: bool = Field(False, description="Served over HTTPS (behind a proxy): Secure cookies, HSTS.")
+    trusted_proxies: list[ipaddress.IPv4Network | ipaddress.IPv6Network] = Field(
+        default_factory=list, description="Reverse proxies' address ranges, e.g. [\"127.0.0.1/32\"]: from a peer in them the "
+                                          "client's address is read from X-Forwarded-For (right to left, past trusted "
+                                          "addresses); default none: the socket's peer is the client.")
     # Model backends: each has a weight-free default; the others load from a local directory.
     annotation_lease_s: int = Field(600, ge=30, description="How long a frame stays with an annotator without a renewal.")
     embedding_cache_mb: int = Field(2048, gt=0, description="Disk budget of the segmenter's embedding cache.")
@@ -153,6 +161,19 @@ class Settings(BaseSettings):
             raise ValueError(f"{value!r} is not a rate limit like '10 per 15 minutes'") from None
         return value
 
+    @field_validator("trusted_proxies", mode="before")
+    @classmethod
+    def _networks(cls, value: Any) -> Any:
+        if not isinstance(value, list | tuple):
+            return value  # pydantic names the wrong type
+        networks = []
+        for item in value:
+            try:
+                networks.append(ipaddress.ip_network(str(item).strip()))
+            except ValueError as exc:
+                raise ValueError(f"{exc}; write an address range like '10.0.0.0/8' or an address like '127.0.0.1'") from None
+        return networks
+
     @model_validator(mode="after")
     def _fill_paths(self) -> Settings:
         home = self.home.expanduser().resolve()
@@ -176,6 +197,11 @@ class Settings(BaseSettings):
     def runs_dir(self) -> Path:
         """Training runs, one directory per run id."""
         return self.home / "runs"
+
+    @property
+    def exports_dir(self) -> Path:
+        """Exports made on the Export page, one folder per export id."""
+        return self.home / "exports"
 
     @property
     def models_dir(self) -> Path:

@@ -5,6 +5,7 @@ right ones always pass; a bad or throttled token on a page answers 401 or 429 wi
 from __future__ import annotations
 
 import uuid
+from contextlib import ExitStack
 from pathlib import Path
 
 import pytest
@@ -61,15 +62,23 @@ def test_a_guessing_address_is_refused_for_that_account_but_its_owner_logs_in(ap
     assert waits == []
 
 
-def test_guesses_from_many_addresses_slow_the_account_down_but_never_refuse_its_owner(app, waits) -> None:  # type: ignore[no-untyped-def]
-    for i in range(8):  # one wrong password from each of 8 addresses: no pair reaches its limit
+def test_guesses_from_many_addresses_slow_the_guessers_down_but_never_the_owner(app, waits) -> None:  # type: ignore[no-untyped-def]
+    for i in range(4):  # one wrong password from each of 4 addresses: no pair reaches its limit
         assert login(from_address(app, f"203.0.113.{i}"), "admin", "wrong-password").status_code == 401
-    assert waits == [0.25, 0.5, 1.0, 1.0]  # past 4 failures: doubling waits, capped at 1 s
-    owner = from_address(app, "198.51.100.7")
-    assert login(owner, "admin").status_code == 302  # slowed down, then in
-    assert waits[-1] == 1.0 and len(waits) == 5
+    assert waits == []  # each address's first failure for the name
+    for i in range(3):  # the name is past 4 failures: an address that has failed for it waits, doubling
+        assert login(from_address(app, f"203.0.113.{i}"), "admin", "wrong-password").status_code == 401
+    assert waits == [0.25, 0.5, 1.0]
+    assert login(from_address(app, "198.51.100.7"), "admin").status_code == 302  # the owner: no wait, in
     assert from_address(app, "198.51.100.8").get("/login").status_code == 200  # a page view waits for nothing
-    assert len(waits) == 5
+    assert waits == [0.25, 0.5, 1.0]
+
+
+def test_an_ipv6_client_counts_by_its_64_network(app, waits) -> None:  # type: ignore[no-untyped-def]
+    for i in range(3):  # a new address of one /64 for each guess
+        assert login(from_address(app, f"2001:db8:1:2::{i + 1}"), "admin", "wrong-password").status_code == 401
+    assert login(from_address(app, "2001:db8:1:2:ffff::9"), "admin").status_code == 429  # the /64's pair is refused
+    assert login(from_address(app, "2001:db8:1:3::1"), "admin").status_code == 302  # the next /64 is someone else
 
 
 def test_one_address_guessing_many_names_is_slowed_not_refused(app, waits) -> None:  # type: ignore[no-untyped-def]
@@ -126,20 +135,34 @@ def test_a_client_throttled_on_the_api_gets_a_429_page_not_a_500(app) -> None:  
         assert response.status_code == 429 and "<h1>429</h1>" in response.get_data(as_text=True)
 
 
-def test_slowed_logins_cannot_hold_every_server_thread(app, monkeypatch) -> None:  # type: ignore[no-untyped-def]
-    """Two slowed logins wait at a time; a third is told to come back, with no wait and no password check."""
+def test_slowed_logins_wait_two_per_address_and_on_half_the_threads(app, waits, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """A slowed login past its address's two waiting slots, or past the server's (half of `serve`'s 8
+    threads), is told to come back, with no wait and no password check; other addresses' still wait."""
     from webapp import throttle
 
     monkeypatch.setattr(throttle.LoginCounters, "wait_s", lambda self, settings: 3.0)
-    holders = [throttle._SLOWED.acquire(blocking=False) for _ in range(throttle.SLOWED_AT_ONCE)]
-    try:
-        assert all(holders)
+    assert throttle.waiting_logins.at_once == 4
+    with ExitStack() as held:
+        assert all(held.enter_context(throttle.waiting_logins.slot("203.0.113.9")) for _ in range(2))
         answer = login(from_address(app, "203.0.113.9"), "admin")
         assert answer.status_code == 429 and answer.headers["Retry-After"] == "3"
         assert "try again in 3 seconds" in answer.get_data(as_text=True)
-    finally:
-        for _ in holders:
-            throttle._SLOWED.release()
+        assert waits == []
+        assert login(from_address(app, "198.51.100.7"), "admin").status_code == 302 and waits == [3.0]
+        assert all(held.enter_context(throttle.waiting_logins.slot(f"192.0.2.{i}")) for i in range(2))
+        assert login(from_address(app, "198.51.100.7"), "admin").status_code == 429 and waits == [3.0]
+    assert login(from_address(app, "203.0.113.9"), "admin").status_code == 302 and waits == [3.0, 3.0]
+
+
+def test_the_waiting_slots_follow_the_servers_threads(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    from webapp import throttle
+
+    monkeypatch.setattr(throttle.waiting_logins, "at_once", throttle.waiting_logins.at_once)  # restored after
+    throttle.size_for_server(16)
+    assert throttle.waiting_logins.at_once == 8
+    throttle.size_for_server(1)
+    with throttle.waiting_logins.slot("203.0.113.9") as first, throttle.waiting_logins.slot("198.51.100.7") as second:
+        assert first and not second
 
 
 def test_a_new_login_ends_the_browsers_old_session_on_the_server(app) -> None:  # type: ignore[no-untyped-def]

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import io
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from dataset.db import migrate, transaction
+from dataset.models import Frame, FrameState, SourceKind, Video
 from dataset.services import users as user_service
 from tests.conftest import PASSWORD, make_settings
 from webapp.runtime import Runtime
@@ -20,6 +22,22 @@ BIG = "99999999999999999999"
 def test_ids_beyond_the_database_range_are_404_or_400(client, tokens, path: str) -> None:  # type: ignore[no-untyped-def]
     status = client.get(path, headers={"Authorization": f"Bearer {tokens['admin']}"}).status_code
     assert status == (400 if "?" in path else 404)
+
+
+@pytest.mark.parametrize(("path", "ascii_path"), [("/api/v1/frames/５", "/api/v1/frames/5"),
+                                                   ("/api/v1/frames/١", "/api/v1/frames/1"),
+                                                   ("/annotate/５", "/annotate/5")])
+def test_ids_in_urls_are_ascii_digits_only(client, runtime, tokens, path: str, ascii_path: str) -> None:  # type: ignore[no-untyped-def]
+    """werkzeug's ``int`` takes any Unicode digit (``５`` is 5, ``١`` is 1); the app's takes ASCII only."""
+    with transaction(runtime.sessions) as s:
+        video = Video(name="v", source_kind=SourceKind.web, content_sha256="f" * 64)
+        s.add(video)
+        s.flush()
+        s.add_all(Frame(video_id=video.id, index=i, time_s=i, width=8, height=8, content_sha256=f"{i:064d}",
+                        media_key="k", state=FrameState.approved) for i in range(5))
+    auth = {"Authorization": f"Bearer {tokens['annotator']}"}
+    assert client.get(ascii_path, headers=auth).status_code == 200
+    assert client.get(path, headers=auth).status_code == 404
 
 
 @pytest.mark.parametrize("query", [f"offset={BIG}", "offset=1e30", "limit=0", "limit=-1",
@@ -93,14 +111,23 @@ def fuzz_app(db_url: str, tmp_path: Path):  # type: ignore[no-untyped-def]
 REVOKES_OWN_CREDENTIALS: set[tuple[str, str]] = set()
 
 
+def documented_answer_checks() -> list[Any]:
+    """schemathesis's checks that an answer's status and content type are documented for its operation."""
+    from schemathesis.checks import content_type_conformance, status_code_conformance
+
+    return [status_code_conformance, content_type_conformance]
+
+
 @pytest.mark.slow
-def test_no_input_the_openapi_document_allows_makes_a_server_error(fuzz_app) -> None:  # type: ignore[no-untyped-def]
+def test_no_input_the_openapi_document_allows_gets_a_server_error_or_an_undocumented_answer(fuzz_app) -> None:  # type: ignore[no-untyped-def]
     import schemathesis
     from hypothesis import HealthCheck, given, seed, settings
     from schemathesis.checks import not_a_server_error
+    from schemathesis.core.failures import FailureGroup
 
     app, auth = fuzz_app
     schema = schemathesis.openapi.from_wsgi("/api/v1/openapi.json", app, headers=auth)
+    checks = [not_a_server_error, *documented_answer_checks()]
     failures = []
     for result in schema.get_all_operations():
         operation = result.ok()
@@ -112,10 +139,10 @@ def test_no_input_the_openapi_document_allows_makes_a_server_error(fuzz_app) -> 
                   suppress_health_check=list(HealthCheck))
         @given(case=operation.as_strategy())
         def run(case) -> None:  # type: ignore[no-untyped-def]
-            case.call_and_validate(headers=auth, checks=[not_a_server_error])
+            case.call_and_validate(headers=auth, checks=checks)
 
         try:
             run()
-        except Exception as exc:  # collect every operation's failure, then report them all
+        except (Exception, FailureGroup) as exc:  # collect every operation's failure, then report them all
             failures.append(f"{operation.method.upper()} {operation.path}: {str(exc)[:400]}")
     assert not failures, "\n".join(failures)

@@ -1,6 +1,6 @@
 """Answers are JSON a strict parser reads (NaN and infinities as null), and a null byte in a URL is a
-400 with its reason on every route, never a 500 from the file system; the upload body limit of the
-app and of waitress follow max_upload_mb."""
+400 with its reason on every route, never a 500 from the file system; uploads are limited to
+max_upload_mb exactly, by the app alone."""
 
 from __future__ import annotations
 
@@ -8,12 +8,11 @@ import io
 import json
 import math
 import threading
-import urllib.error
-import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import httpx
 import pytest
 from flask import Flask
 
@@ -84,7 +83,7 @@ def test_a_null_byte_in_a_url_is_a_400_with_its_reason(client, runtime: Runtime,
 
 @pytest.fixture
 def small_upload_server(tmp_path: Path) -> Iterator[tuple[str, str]]:
-    """waitress serving a workspace whose max_upload_mb is 1, as `serve` starts it; (URL, curator token)."""
+    """The app under `serve`'s server, on a workspace whose max_upload_mb is 1; (URL, curator token)."""
     from webapp.cli.workspace import make_server, server_url
 
     settings = make_settings(tmp_path / "ws", max_upload_mb=1)
@@ -107,13 +106,10 @@ def _post_file(url: str, token: str, size: int) -> tuple[int, str, str]:
     body = (f"--{boundary}\r\nContent-Disposition: form-data; name=\"file\"; filename=\"clip.avi\"\r\n"
             f"Content-Type: application/octet-stream\r\n\r\n").encode() + b"RIFF" + b"\0" * (size - 4) \
         + f"\r\n--{boundary}--\r\n".encode()
-    request = urllib.request.Request(f"{url}/api/v1/videos", data=body, method="POST", headers={
+    # httpx reads the answer when the server hangs up on a body it refused unread (urllib would report the reset)
+    response = httpx.post(f"{url}/api/v1/videos", content=body, timeout=30, headers={
         "Authorization": f"Bearer {token}", "Content-Type": f"multipart/form-data; boundary={boundary}"})
-    try:
-        with urllib.request.urlopen(request, timeout=30) as response:
-            return response.status, response.headers.get("Content-Type", ""), response.read().decode()
-    except urllib.error.HTTPError as exc:
-        return exc.code, exc.headers.get("Content-Type", ""), exc.read().decode()
+    return response.status_code, response.headers.get("Content-Type", ""), response.text
 
 
 def test_upload_limits_follow_max_upload_mb(small_upload_server: tuple[str, str]) -> None:
@@ -121,23 +117,34 @@ def test_upload_limits_follow_max_upload_mb(small_upload_server: tuple[str, str]
     # a file of exactly max_upload_mb passes the size limits (and is then judged as a video)
     status, _, text = _post_file(url, token, 1 << 20)
     assert status != 413, text
-    # one just over it gets the app's JSON answer, not waitress's plain-text page
+    # one byte more is refused: the limit is on the file, not on the request around it
+    status, content_type, text = _post_file(url, token, (1 << 20) + 1)
+    assert status == 413 and content_type.startswith("application/json"), (status, content_type, text)
+    assert "at most 1 MiB" in json.loads(text)["error"]
+    # a body far over it is refused from its Content-Length, in the app's JSON
     status, content_type, text = _post_file(url, token, (1 << 20) + (2 << 20))
     assert status == 413 and content_type.startswith("application/json"), (status, content_type, text)
     assert "error" in json.loads(text)
 
 
-def test_waitress_body_limit_is_above_the_apps(tmp_path: Path) -> None:
-    """waitress's own default (1 GiB) sat below the default max_upload_mb (2048)."""
-    from webapp.app import request_body_limit
-    from webapp.cli.workspace import waitress_options
+def test_the_server_leaves_body_limits_to_the_app(tmp_path: Path) -> None:
+    """waitress's own limit (1 GiB by default) sat below the default max_upload_mb (2048); the
+    server now has none, and the upload route's is the app's."""
+    from webapp.bodies import UPLOAD_ENDPOINT, body_limit, upload_body_limit
+    from webapp.cli.workspace import make_server
 
     settings = make_settings(tmp_path / "ws")
+    migrate(settings.database_url)
     assert settings.max_upload_mb == 2048
-    limit = waitress_options(settings, threads=1)["max_request_body_size"]
-    assert limit > request_body_limit(settings) > 2048 * (1 << 20)
-    app = create_app(settings)
-    assert app.config["MAX_CONTENT_LENGTH"] == request_body_limit(settings)
+    rt = Runtime(settings)
+    server = make_server(settings, rt, "127.0.0.1", 0, threads=1)
+    try:
+        assert server.max_request_body_size == 0
+        app = create_app(settings, rt)
+        assert body_limit(app, UPLOAD_ENDPOINT, settings) == upload_body_limit(settings) > 2048 * (1 << 20)
+    finally:
+        server.close()
+        rt.close()
 
 
 def test_upload_of_the_full_size_passes_the_apps_limit(tmp_path: Path) -> None:

@@ -35,6 +35,8 @@ def test_home_from_environment(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) 
     ("port = 0", "port"),
     ('segmenter = "magic"', "segmenter"),
     ("no_such_setting = 1", "no_such_setting"),
+    ('trusted_proxies = ["10.0.0.5/8"]', r"trusted_proxies: .*host bits set; write an address range like '10.0.0.0/8'"),
+    ('trusted_proxies = ["proxy.example"]', "trusted_proxies: .*does not appear to be an IPv4 or IPv6 network"),
 ])
 def test_bad_settings_file_is_one_clear_line(tmp_path: Path, content: str, message: str) -> None:
     (tmp_path / "illusion-studio.toml").write_text(content)

@@ -18,6 +18,7 @@ from dataset.services.validate import DB_INT_MAX
 from dataset.settings import Settings
 from dataset.wording import plural
 from webapp.auth import init_auth, is_api_request, json_error
+from webapp.bodies import init_body_limits
 from webapp.headers import init_headers
 from webapp.json_provider import FiniteJSONProvider
 from webapp.redact import init_redaction
@@ -25,8 +26,14 @@ from webapp.runtime import Runtime
 from webapp.throttle import init_throttle
 
 
-class DatabaseInt(IntegerConverter):
-    """``<int:…>`` limited to the integers the database's INTEGER columns store."""
+class AsciiIntegerConverter(IntegerConverter):
+    """``<int:…>`` in URLs: ASCII digits only (werkzeug's ``\\d`` also takes ``２`` or ``١`` as 2 and 1)."""
+
+    regex = r"[0-9]+"
+
+
+class DatabaseInt(AsciiIntegerConverter):
+    """``<int:…>``: ASCII digits, limited to the integers the database's INTEGER columns store."""
 
     def __init__(self, url_map: Map, *args: Any, **kwargs: Any) -> None:
         kwargs.setdefault("max", DB_INT_MAX)
@@ -34,11 +41,6 @@ class DatabaseInt(IntegerConverter):
 
 
 STALE_UPLOAD_S = 600.0
-# A file of exactly max_upload_mb comes wrapped in multipart boundaries and the form's other fields.
-UPLOAD_ENVELOPE_BYTES = 1 << 20
-# waitress buffers a whole body before the app sees it; bodies up to this much over the app's limit
-# still reach the app, for its own 413 answer (see webapp.cli.workspace.waitress_options).
-SERVER_SLACK_BYTES = 16 << 20
 STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
 
 
@@ -50,12 +52,10 @@ def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
     app = Flask(__name__, static_folder=str(STATIC_DIR), static_url_path="/static")
     app.config.update(
         SECRET_KEY=settings.secret_key or _stored_secret(settings.home),
-        MAX_CONTENT_LENGTH=request_body_limit(settings),
         SESSION_COOKIE_HTTPONLY=True,
         SESSION_COOKIE_SAMESITE="Lax",
         SESSION_COOKIE_SECURE=settings.https,
     )
-    app.url_map.converters["int"] = AsciiIntegerConverter
     app.json = FiniteJSONProvider(app)
     app.json.sort_keys = False  # type: ignore[attr-defined]
     # Before any route is added: ids beyond what the database stores are a 404, not a crash.
@@ -74,6 +74,8 @@ def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
         if "\x00" in request.path or any("\x00" in key or any("\x00" in v for v in values)
                                          for key, values in request.args.lists()):
             abort(400, "the URL contains a null byte (%00): no path or name holds one")
+
+    init_body_limits(app, settings)  # before any hook that may read a body: the limits, auth, CSRF
 
     @app.teardown_request
     def _close_session(_exc: BaseException | None) -> None:
@@ -94,17 +96,6 @@ def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
     init_redaction(app, settings)
     _register_errors(app)
     return app
-
-
-class AsciiIntegerConverter(IntegerConverter):
-    """``<int:…>`` in URLs: ASCII digits only (werkzeug's ``\\d`` also takes ``２`` or ``١`` as 2 and 1)."""
-
-    regex = r"[0-9]+"
-
-
-def request_body_limit(settings: Settings) -> int:
-    """The largest request body the app reads, in bytes: one upload of ``max_upload_mb`` MiB and its envelope."""
-    return settings.max_upload_mb * 1024 * 1024 + UPLOAD_ENVELOPE_BYTES
 
 
 def _stored_secret(home: Path) -> str:

@@ -182,6 +182,7 @@ def init_auth(app: Flask) -> None:
                 return redirect(url_for("auth.login", next=request.full_path.rstrip("?")))
             if not current_user.allows(required):
                 abort(403, f"needs the {required.value} role")
+        # The first read of a body (the form's token): after the body limit (webapp.bodies) and the role checks above.
         if request.method not in ("GET", "HEAD", "OPTIONS") and not getattr(current_user, "via_token", False):
             csrf.protect()
         return None

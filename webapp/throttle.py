@@ -3,12 +3,31 @@
 Logins (the spirit of OWASP ASVS V2.2). Failed logins are counted per (user name, address), per
 user name and per address. Past ``login_limit_per_account_address`` that address gets 429 with
 ``Retry-After`` for that name, its password unchecked: the guesser is refused. The wider counters
-never refuse, since anyone could drive them up: past ``login_slowdown_per_account`` (one name, all
-addresses) or ``login_slowdown_per_address`` (one address, all names) every login they cover waits
-before its password is checked, 0.25 s doubling with each further failure up to
-``login_slowdown_max_s``. Right or wrong password alike, so the wait tells nothing; then the login
-succeeds or fails as usual. A stranger can thus slow an account down but not lock its owner out,
-and the owner's own address is refused only once it has been guessing itself.
+never refuse, since anyone could drive them up; past them a login waits before its password is
+checked, 0.25 s doubling with each further failure up to ``login_slowdown_max_s``, right or wrong
+password alike (the wait tells nothing), then succeeds or fails as usual:
+
+- past ``login_slowdown_per_address`` (one address, all names), every login from that address;
+- past ``login_slowdown_per_account`` (one name, all addresses), the logins for that name from
+  addresses that have themselves failed for it (in the pair counter's window). An address that
+  has not is not made to wait for the others' failures. Making it wait would need a thread for
+  the wait, and so a cap on waiting logins that strangers can fill (with many addresses if the
+  cap is per address), so the owner's login would be refused after all: the README's promise
+  could not be kept. What the exemption gives a guesser is one unslowed guess per name per
+  address and window; a second waits, and the pair's limit refuses it soon after.
+
+A stranger can thus slow an account down but not lock its owner out: the owner's right password
+from an address that has not been guessing is neither refused nor slowed by anyone else's failures.
+
+A waiting login holds a server thread, so waits are capped (:class:`WaitingLogins`): at most
+:data:`WAITING_PER_ADDRESS` per client address — one address cannot hold more, however many
+connections it opens — and, of all addresses, half the server's threads, so other routes (and
+logins that need not wait) keep answering. A slowed login past either cap is answered 429 at
+once, its password unchecked. The caps count this process's threads, so they live in memory.
+
+Addresses are the clients' as :mod:`webapp.proxies` resolves them behind ``trusted_proxies``; an
+IPv6 client counts by its /64 network, since a machine or household gets a whole /64 and would
+otherwise have 2^64 fresh counters.
 
 API tokens. A right token always passes. A bad one is counted per address and, when it names a
 token (``ist_<id>_…``), per account; past either limit bad tokens get 429 instead of 401. Others'
@@ -23,32 +42,84 @@ by every process on the machine, like the default job queue. While the counters 
 (Redis down) throttling is skipped: an outage of the counters must not lock everyone out, and the
 requests that need the queue on that Redis answer 503 anyway.
 """
-
 from __future__ import annotations
 
+import ipaddress
 import logging
 import math
 import sqlite3
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
-from flask import Flask
+from flask import Flask, request
 from flask_limiter import Limiter
-from flask_limiter.util import get_remote_address
 from limits import RateLimitItem, parse
 from limits.storage import Storage
 
 from dataset.settings import Settings
+from webapp.proxies import TrustedProxies, parse_address
 
 log = logging.getLogger(__name__)
-limiter = Limiter(key_func=get_remote_address)
 T = TypeVar("T")
-SLOWED_AT_ONCE = 2  # logins sleeping at once, of the server's threads (waitress: 8)
-_SLOWED = threading.BoundedSemaphore(SLOWED_AT_ONCE)
 FIRST_WAIT_S = 0.25  # the first slowed-down login's wait; each further failure doubles it
+WAITING_PER_ADDRESS = 2  # slowed logins one client address may have waiting at once (a double-clicked form: 2)
+DEFAULT_SERVER_THREADS = 8  # `serve --threads`' default
+
+
+def client_key() -> str:
+    """The address this request's failures count under: the client's (``REMOTE_ADDR``, which
+    :mod:`webapp.proxies` resolved), an IPv6 one as its /64 network."""
+    text = request.remote_addr or ""
+    address = parse_address(text)
+    if address is None:
+        return text  # not an IP address (a Unix socket's peer): counted as the server reports it
+    if address.version == 6:
+        return str(ipaddress.ip_network(f"{address}/64", strict=False))
+    return str(address)
+
+
+limiter = Limiter(key_func=client_key)
+
+
+class WaitingLogins:
+    """The slowed logins this process has waiting: at most ``per_address`` for one client
+    address and ``at_once`` in all (a wait holds a server thread)."""
+
+    def __init__(self, at_once: int, per_address: int = WAITING_PER_ADDRESS) -> None:
+        self.at_once = at_once
+        self.per_address = per_address
+        self._lock = threading.Lock()
+        self._waiting: dict[str, int] = {}
+
+    @contextmanager
+    def slot(self, address: str) -> Iterator[bool]:
+        """True inside while ``address`` holds one of the slots; False (nothing held) when a cap is reached."""
+        with self._lock:
+            held = self._waiting.get(address, 0)
+            granted = held < self.per_address and sum(self._waiting.values()) < self.at_once
+            if granted:
+                self._waiting[address] = held + 1
+        try:
+            yield granted
+        finally:
+            if granted:
+                with self._lock:
+                    if (left := self._waiting[address] - 1) > 0:
+                        self._waiting[address] = left
+                    else:
+                        del self._waiting[address]
+
+
+waiting_logins = WaitingLogins(at_once=DEFAULT_SERVER_THREADS // 2)
+
+
+def size_for_server(threads: int) -> None:
+    """Let slowed logins wait on at most half of the server's ``threads`` worker threads (at least one)."""
+    waiting_logins.at_once = max(1, threads // 2)
 
 
 @dataclass(frozen=True)
@@ -87,8 +158,9 @@ def _unless_down(what: str, default: T, action: Callable[[], T]) -> T:
 
 @dataclass(frozen=True)
 class LoginCounters:
-    """The three counters a login attempt for one name from one address touches."""
+    """The three counters a login attempt for one name from one address (``client``) touches."""
 
+    client: str
     pair: Counter
     account: Counter
     address: Counter
@@ -96,10 +168,11 @@ class LoginCounters:
     @classmethod
     def of(cls, settings: Settings, name: str) -> LoginCounters:
         """Counters for user name ``name`` (case and surrounding spaces ignored) from this request's address."""
-        name, address, scope = name.strip().lower(), get_remote_address(), settings.queue_name
-        return cls(pair=Counter(parse(settings.login_limit_per_account_address), (scope, "login", name, address)),
+        name, client, scope = name.strip().lower(), client_key(), settings.queue_name
+        return cls(client=client,
+                   pair=Counter(parse(settings.login_limit_per_account_address), (scope, "login", name, client)),
                    account=Counter(parse(settings.login_slowdown_per_account), (scope, "login-account", name)),
-                   address=Counter(parse(settings.login_slowdown_per_address), (scope, "login-address", address)))
+                   address=Counter(parse(settings.login_slowdown_per_address), (scope, "login-address", client)))
 
     def refused(self) -> int | None:
         """Seconds until this address may try this name again, once it failed too often; else None."""
@@ -107,26 +180,26 @@ class LoginCounters:
                             lambda: self.pair.retry_after() if self.pair.exceeded() else None)
 
     def wait_s(self, settings: Settings) -> float:
-        """How long this attempt waits: 0 until the name's or the address's failures reach their
-        slow-down limit, then 0.25 s doubling with each further failure, at most ``login_slowdown_max_s``."""
+        """How long this attempt waits: 0 until the address's failures, or the name's when this
+        address has failed for it too, reach their slow-down limit; then 0.25 s doubling with each
+        further failure, at most ``login_slowdown_max_s``."""
         def wait() -> float:
-            beyond = max(c.count() - c.limit.amount for c in (self.account, self.address))
+            counters = (self.address, self.account) if self.pair.count() else (self.address,)
+            beyond = max(c.count() - c.limit.amount for c in counters)
             return 0.0 if beyond < 0 else min(settings.login_slowdown_max_s, FIRST_WAIT_S * 2.0 ** min(beyond, 32))
 
         return _unless_down("login slow-down", 0.0, wait)
 
     def slow_down(self, settings: Settings) -> int | None:
-        """Wait :meth:`wait_s` before the password is checked (a plain sleep: no lock is held).
-        At most :data:`SLOWED_AT_ONCE` logins wait at a time, so a flood of slowed logins cannot
-        hold every server thread: past that, returns the seconds to come back after (no wait)."""
+        """Wait :meth:`wait_s` before the password is checked (a plain sleep: no lock is held), in
+        one of :data:`waiting_logins`' slots; when this address's or the server's are all taken,
+        return the seconds to come back after instead (no wait), so waits cannot hold every thread."""
         if (seconds := self.wait_s(settings)) <= 0:
             return None
-        if not _SLOWED.acquire(blocking=False):
-            return max(1, math.ceil(seconds))
-        try:
+        with waiting_logins.slot(self.client) as granted:
+            if not granted:
+                return max(1, math.ceil(seconds))
             time.sleep(seconds)
-        finally:
-            _SLOWED.release()
         return None
 
     def failed(self) -> None:
@@ -149,7 +222,7 @@ TOKEN_LIMIT_MESSAGE = "too many bad API tokens; try again later"
 def _token_counters(settings: Settings, account: int | None) -> list[Counter]:
     """Bad tokens from this address and, when the token names one, for its account."""
     scope = settings.queue_name
-    counters = [Counter(parse(settings.token_limit_per_address), (scope, "token", get_remote_address()))]
+    counters = [Counter(parse(settings.token_limit_per_address), (scope, "token", client_key()))]
     if account is not None:
         counters.append(Counter(parse(settings.token_limit_per_account), (scope, "token-account", str(account))))
     return counters
@@ -177,6 +250,8 @@ def storage_uri(settings: Settings) -> str:
 
 
 def init_throttle(app: Flask, settings: Settings) -> None:
+    """Counters in :func:`storage_uri`'s storage, for clients resolved behind ``trusted_proxies``."""
+    app.wsgi_app = TrustedProxies(app.wsgi_app, settings.trusted_proxies)  # type: ignore[method-assign]
     app.config.update(RATELIMIT_STORAGE_URI=storage_uri(settings), RATELIMIT_STRATEGY="fixed-window",
                       RATELIMIT_SWALLOW_ERRORS=True)
     limiter.init_app(app)

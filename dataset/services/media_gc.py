@@ -2,7 +2,9 @@
 
 Keys are found anywhere in the referencing columns, nested JSON included (a sample's masks, a
 frame's assets, a job's upload path), so a new kind of side file needs no change here; a new
-table that references media adds its columns to :data:`REFERENCE_COLUMNS`.
+table that references media adds its columns to :data:`REFERENCE_COLUMNS`. A job's parameters
+keep their files only while it may still run (:data:`LIVE_JOB_PARAMS`): a refused upload (a file
+ingest could not read) would otherwise stay for as long as its failed job's row.
 """
 
 from __future__ import annotations
@@ -26,9 +28,12 @@ REFERENCE_COLUMNS: tuple[InstrumentedAttribute[Any], ...] = (
     Frame.media_key, Frame.assets,
     Video.original_path, Video.meta,
     Sample.files,
-    Job.params, Job.result,
+    Job.result,
     TrainingRun.dataset,
 )
+# Queued, running, or interrupted (its worker died; a retry resumes it). A finished ingest's video
+# references its upload itself (Video.original_path); a failed one's upload goes after the grace.
+LIVE_JOB_PARAMS = select(Job.params).where(Job.state.in_((JobState.queued, JobState.running, JobState.interrupted)))
 INCOMING = ".incoming"
 
 
@@ -59,8 +64,8 @@ def referenced_keys(session: Session, media: MediaStore) -> set[str]:
     """Every media key the database references (keys, or absolute paths inside the store)."""
     root = str(media.root) + "/"
     keys = set()
-    for column in REFERENCE_COLUMNS:
-        for value in session.scalars(select(column)):
+    for query in (*(select(column) for column in REFERENCE_COLUMNS), LIVE_JOB_PARAMS):
+        for value in session.scalars(query):
             for text in _strings(value):
                 keys.add(text[len(root):] if text.startswith(root) else text)
     return keys

@@ -21,23 +21,49 @@ def _list(name: str, **extra: Any) -> dict[str, Any]:
     return {"type": "object", "properties": {"items": {"type": "array", "items": _ref(name)}, **extra}}
 
 
-_ERR = {"description": "error", "content": _json(_ref("Error"))}
+# Statuses any operation may answer, whatever it does; _op adds the others where they apply.
+_ANY = {
+    "400": "bad input: a malformed query or body, a null byte in the URL, or (session callers) a failed CSRF check",
+    "401": "no valid credentials: log in or send 'Authorization: Bearer <token>'",
+    # webapp/bodies.py limits every route's body, an operation's that takes none included.
+    "413": "the request body is larger than this operation takes (an upload: the max_upload_mb setting)",
+    "429": "too many bad API tokens from this address or for this token's account; Retry-After says when to retry",
+}
+_ABOVE_ANNOTATOR = {"403": "the caller's role is below the one this operation needs"}
+_WITH_ID = {"404": "no such row: an id in the path names nothing (or nothing the caller may see)"}
+_QUEUE_DOWN = {"503": "the job queue is unreachable: nothing was queued or written; try again in a minute"}
 
 
-def _op(summary: str, role: str, *, params: list[dict[str, Any]] | None = None,
-        body: str | None = None, ok: str = "200", schema: str | None = None) -> dict[str, Any]:
-    op: dict[str, Any] = {
-        "summary": summary,
-        "description": f"Needs the **{role}** role (or higher).",
-        "parameters": params or [],
-        "responses": {
-            ok: {"description": "success", "content": _json(_ref(schema))} if schema else {"description": "success"},
-            "401": _ERR, "403": _ERR,
-        },
-    }
+def _error(description: str) -> dict[str, Any]:
+    """An error response: a JSON body ``{"error", "status"}`` (the API never answers an HTML page)."""
+    return {"description": description, "content": _json(_ref("Error"))}
+
+
+def _op(summary: str, role: str, *, params: list[dict[str, Any]] | None = None, body: str | None = None,
+        body_type: str = "application/json", ok: str = "200", schema: str | None = None,
+        files: tuple[str, ...] = (), errors: dict[str, str] | None = None) -> dict[str, Any]:
+    """An operation: its success ``ok`` (a JSON ``schema``, else the ``files`` media types it serves) and
+    every status it can answer: those of :data:`_ANY`; 403 above the annotator role; 404 with ids in
+    the path; the download statuses with ``files``; and its own ``errors`` (status → why; they may
+    reword the ones above)."""
+    params = params or []
+    if files:
+        success = {"description": "the file", "content": {t: {"schema": {"type": "string", "format": "binary"}}
+                                                         for t in files}}
+    else:
+        success = {"description": "success", "content": _json(_ref(schema) if schema else {"type": "object"})}
+    reasons = {**_ANY, **(_ABOVE_ANNOTATOR if role != "annotator" else {}),
+               **(_WITH_ID if any(p["in"] == "path" for p in params) else {}), **(errors or {})}
+    responses: dict[str, Any] = {ok: success}
+    if files:  # send_file honours Range and the validators (If-None-Match, …)
+        responses["206"] = {**success, "description": "part of the file (a Range request)"}
+        responses["304"] = {"description": "not modified since the validators the request sent"}
+        reasons["416"] = "the requested range lies outside the file"
+    responses.update({code: _error(why) for code, why in sorted(reasons.items())})
+    op: dict[str, Any] = {"summary": summary, "description": f"Needs the **{role}** role (or higher).",
+                          "parameters": params, "responses": responses}
     if body:
-        op["requestBody"] = {"required": True, "content": _json(_ref(body))}
-        op["responses"]["400"] = _ERR
+        op["requestBody"] = {"required": True, "content": {body_type: {"schema": _ref(body)}}}
     return op
 
 
@@ -61,12 +87,16 @@ _BY_ERROR = [_q("evaluation", desc="an evaluation id: its database samples, wors
              _q("sort", "string", "error (EPE, default) or bad2"), _q("method", "string", "default: its first method"),
              _q("region", "string", "all (default) or illusion"),
              _q("min_error", "number", "only samples at or above it (EPE px, bad-2 %)")]
+# What an evaluation's report folder holds (model/report.py), as served: named types, else octet-stream.
+_REPORT_FILES = ("application/json", "text/csv", "text/html", "text/plain", "text/javascript", "image/png",
+                 "application/octet-stream")
 _RUN_ID = {"name": "run_id", "in": "path", "required": True, "schema": {"type": "integer"}}
 _CHECKPOINT = {"name": "name", "in": "path", "required": True, "schema": {"type": "string"},
                "description": "a file name from the run's checkpoints (best.pt, step_0001000.pt, …)"}
 
 
 def openapi_document() -> dict[str, Any]:
+    """The document ``/api/v1/openapi.json`` serves: every operation with each status and content type it answers."""
     return {
         "openapi": "3.1.0",
         "info": {"title": "Illusion Studio API", "version": "1"},
@@ -77,19 +107,21 @@ def openapi_document() -> dict[str, Any]:
             "/me": {"get": _op("The calling user", "annotator", schema="User")},
             "/users": {
                 "get": _op("List users", "admin", schema="UserList"),
-                "post": _op("Create a user", "admin", body="NewUser", ok="201", schema="User"),
+                "post": _op("Create a user", "admin", body="NewUser", ok="201", schema="User",
+                            errors={"409": "a user of that name (ignoring case) exists"}),
             },
             "/frames": {"get": _op("List frames, ordered by video and time", "annotator", schema="FrameList",
                                    params=[_q("video_id"), _q("state", "string", "ingested, prefiltered, approved, …"),
-                                           _q("limit", desc="1..10000, default 100"), _q("offset"), *_CURSORS])},
+                                           _q("limit", desc="1..500, default 100"), _q("offset"), *_CURSORS])},
             "/videos": {
                 "get": _op("List videos with their frame counts, newest first", "annotator", schema="VideoList",
                            params=[_q("limit", desc="1..1000, default 100"), *_CURSORS]),
                 "post": _op("Upload a video (multipart: file, fps, source, illusion_type…); starts an ingest job",
-                            "curator", body="VideoUpload", ok="202", schema="Job"),
+                            "curator", body="VideoUpload", body_type="multipart/form-data", ok="202", schema="Job",
+                            errors=_QUEUE_DOWN),
             },
             "/prefilter": {"post": _op("Queue VLM prefilter jobs for unclaimed ingested frames", "curator",
-                                       body="PrefilterRequest", ok="202", schema="JobBatch")},
+                                       body="PrefilterRequest", ok="202", schema="JobBatch", errors=_QUEUE_DOWN)},
             "/review/frames": {"get": _op(
                 "Frames to review with VLM answers and figures", "curator", schema="ReviewPage",
                 params=[_q("video_id"), _q("state", "string", "prefiltered (default), approved, rejected, all"),
@@ -98,55 +130,74 @@ def openapi_document() -> dict[str, Any]:
                         *_CURSORS])},
             "/frames/{frame_id}/review": {"post": _op(
                 "Approve, reject (with a reason) or reset a frame; 409 if it changed", "curator",
-                params=[_FRAME_ID], body="ReviewDecision", schema="ReviewItem")},
+                params=[_FRAME_ID], body="ReviewDecision", schema="ReviewItem",
+                errors={"409": "the frame changed since `revision`, or is in no state to review; the answer's "
+                               "`frame` is the frame as it is now"})},
             "/queue/annotate/next": {"post": _op(
-                "Lease the next approved frame to the caller (404 when none are left)", "annotator", schema="Lease")},
+                "Lease the next approved frame to the caller (404 when none are left)", "annotator", schema="Lease",
+                errors={"404": "no approved frames are waiting for annotation",
+                        # taking a frame queues the embeddings of it and the next ones
+                        **_QUEUE_DOWN})},
             "/frames/{frame_id}": {"get": _op("A frame with its annotation, lease and neighbours", "annotator",
                                               params=[_FRAME_ID], schema="FrameDetail")},
-            "/frames/{frame_id}/lease": {"post": _op("Renew the caller's lease (409: someone else holds it)", "annotator",
-                                                     params=[_FRAME_ID], schema="Lease")},
-            "/frames/{frame_id}/lease/release": {"post": _op("Give the frame back to the queue", "annotator",
-                                                             params=[_FRAME_ID])},
+            "/frames/{frame_id}/lease": {"post": _op(
+                "Take or renew the caller's lease (409: someone else holds it)", "annotator", params=[_FRAME_ID],
+                schema="Lease", errors={"409": "someone else holds the frame, or it is not approved", **_QUEUE_DOWN})},
+            "/frames/{frame_id}/lease/release": {"post": _op(
+                "Give the frame back to the queue (`released`: false when the caller held no lease)", "annotator",
+                params=[_FRAME_ID], schema="LeaseRelease", errors={"409": "someone else holds the frame's lease"})},
             "/frames/{frame_id}/segment": {"post": _op("Clicks (and a box) → a mask as COCO RLE", "annotator",
                                                        params=[_FRAME_ID], body="SegmentRequest", schema="SegmentResult")},
             "/frames/{frame_id}/annotation": {"post": _op(
                 "Save (submit=false: a draft) or submit the regions; a stale version is a 409", "annotator",
-                params=[_FRAME_ID], body="AnnotationSave")},
+                params=[_FRAME_ID], body="AnnotationSave", schema="AnnotationSaved",
+                errors={"409": "the annotation changed since `version`, someone else holds the frame, or it is not "
+                               "approved; nothing was written",
+                        "503": "submitting queues the sample's generation, and the job queue is unreachable: nothing "
+                               "was written; try again in a minute"})},
             "/frames/{frame_id}/proposals/{proposal_id}/reject": {"post": _op(
                 "Turn a pending proposal of the frame down (409: someone else holds the frame)", "annotator",
-                params=[_FRAME_ID, _PROPOSAL_ID], schema="ProposalFate")},
-            "/frames/{frame_id}/delete": {"post": _op("Mark the frame redundant or imperceptible", "annotator",
-                                                      params=[_FRAME_ID], body="DeleteFrame")},
+                params=[_FRAME_ID, _PROPOSAL_ID], schema="ProposalFate",
+                errors={"409": "the caller holds no lease on the frame, or it is no longer being annotated"})},
+            "/frames/{frame_id}/delete": {"post": _op(
+                "Mark the frame redundant or imperceptible", "annotator", params=[_FRAME_ID], body="DeleteFrame",
+                schema="FrameState", errors={"409": "someone else holds the frame, or it is not approved"})},
             "/frames/{frame_id}/propagate": {"post": _op(
                 "Carry a region's mask to the next frames as drafts (a job)", "annotator",
-                params=[_FRAME_ID], body="Propagate", ok="202", schema="Job")},
+                params=[_FRAME_ID], body="Propagate", ok="202", schema="Job", errors=_QUEUE_DOWN)},
             "/review/bulk": {"post": _op("Review many frames; each item succeeds or fails on its own", "curator",
                                          body="BulkReview", schema="BulkResults")},
             "/samples": {"get": _op("Generated samples with QA figures", "annotator", schema="SampleList",
                                     params=[_q("state", "string", "generated, accepted, rejected"),
                                             _q("flagged", "string", "true or false"), _q("limit"), _q("offset"), *_CURSORS,
-                                            *_BY_ERROR])},
+                                            *_BY_ERROR],
+                                    errors={"404": "`evaluation` names no evaluation"})},
             "/samples/{sample_id}": {"get": _op("One sample: files, parameters, provenance, QA", "annotator",
                                                 params=[_SAMPLE_ID], schema="Sample")},
             "/samples/{sample_id}/review": {"post": _op(
                 "Accept (joins the dataset) or reject (back to annotators) a sample", "curator",
-                params=[_SAMPLE_ID], body="SampleDecision", schema="Sample")},
+                params=[_SAMPLE_ID], body="SampleDecision", schema="Sample",
+                errors={"409": "the sample is not of the frame's current annotation, or its frame moved on"})},
             "/samples/{sample_id}/regenerate": {"post": _op("Generate the sample again (a job)", "curator",
-                                                            params=[_SAMPLE_ID], ok="202", schema="Job")},
+                                                            params=[_SAMPLE_ID], ok="202", schema="Job",
+                                                            errors=_QUEUE_DOWN)},
             "/stats/funnel": {"get": _op("Pipeline funnel counts", "annotator", schema="Funnel")},
             "/stats/proposers": {"get": _op("Per proposer: frames, proposals by fate, acceptance rate, median IoU, "
                                             "misses", "annotator", schema="ProposerStats")},
             "/jobs": {"get": _op("List jobs (annotators: their own)", "annotator", schema="JobList",
                                  params=[_q("state", "string"), _q("limit", desc="1..500, default 50"), *_CURSORS])},
             "/jobs/{job_id}": {"get": _op("One job with its log", "annotator", params=[_JOB_ID], schema="Job")},
-            "/jobs/{job_id}/retry": {"post": _op("Retry a failed or interrupted job (a training job: admins, "
-                                                 "and it resumes the run)", "curator",
-                                                 params=[_JOB_ID], ok="202", schema="Job")},
+            "/jobs/{job_id}/retry": {"post": _op(
+                "Retry a failed or interrupted job (a training job: admins, and it resumes the run)", "curator",
+                params=[_JOB_ID], ok="202", schema="Job",
+                errors={"403": "a training job, and the caller is not an admin",
+                        "409": "the job did not fail and was not interrupted (a run: it cannot resume now)",
+                        **_QUEUE_DOWN})},
             "/runs": {
                 "get": _op("Training runs, newest first (and the current model)", "curator", schema="RunList",
                            params=[_q("ids", "string", "comma-separated run ids (the compare page)")]),
                 "post": _op("Launch a training run on the train queue; an empty selection is a 400 with the reason",
-                            "admin", body="RunLaunch", ok="202", schema="Run"),
+                            "admin", body="RunLaunch", ok="202", schema="Run", errors=_QUEUE_DOWN),
             },
             "/runs/{run_id}": {"get": _op("One run with config, dataset version, splits and checkpoints", "curator",
                                           params=[_RUN_ID], schema="Run")},
@@ -155,24 +206,30 @@ def openapi_document() -> dict[str, Any]:
                                                           _q("after_val", desc="validation step; default -1: all")],
                                                   schema="RunMetrics")},
             "/runs/{run_id}/cancel": {"post": _op("Stop a queued or running run (its whole process group)", "admin",
-                                                  params=[_RUN_ID], ok="202", schema="Run")},
-            "/runs/{run_id}/resume": {"post": _op("Continue an interrupted, failed or cancelled run from its newest "
-                                                  "checkpoint", "admin", params=[_RUN_ID], ok="202", schema="Run")},
+                                                  params=[_RUN_ID], ok="202", schema="Run",
+                                                  errors={"409": "the run is neither queued nor running"})},
+            "/runs/{run_id}/resume": {"post": _op(
+                "Continue an interrupted, failed or cancelled run from its newest checkpoint", "admin",
+                params=[_RUN_ID], ok="202", schema="Run",
+                errors={"409": "the run is in no state to resume, or its trainers are still stopping", **_QUEUE_DOWN})},
             "/runs/{run_id}/promote": {"post": _op("Make a checkpoint of the run the current model", "admin",
                                                    params=[_RUN_ID], body="Promote", schema="CurrentModel")},
             "/evaluations": {
                 "get": _op("Evaluations, newest first, with their job's state and progress", "curator",
                            schema="EvaluationList"),
                 "post": _op("Queue an evaluate job on a dataset folder or a run's test split", "curator",
-                            body="EvaluationLaunch", ok="202", schema="Evaluation"),
+                            body="EvaluationLaunch", ok="202", schema="Evaluation", errors=_QUEUE_DOWN),
             },
             "/evaluations/{evaluation_id}": {"get": _op("One evaluation and its headline table", "curator",
                                                         params=[_EVALUATION_ID], schema="Evaluation")},
             "/evaluations/{evaluation_id}/files/{name}": {"get": _op(
-                "A file of the report folder (report.json, per_sample.csv, pictures/…, predictions/…)", "curator",
-                params=[_EVALUATION_ID, {"name": "name", "in": "path", "required": True, "schema": {"type": "string"}}])},
-            "/runs/{run_id}/checkpoints/{name}": {"get": _op("Download a checkpoint file", "curator",
-                                                             params=[_RUN_ID, _CHECKPOINT])},
+                "A file of the report folder (report.json, per_sample.csv, index.html, pictures/…, predictions/…)",
+                "curator", params=[_EVALUATION_ID, {"name": "name", "in": "path", "required": True,
+                                                    "schema": {"type": "string"}}], files=_REPORT_FILES,
+                errors={"404": "no such evaluation, no report yet, or no such file in its report folder"})},
+            "/runs/{run_id}/checkpoints/{name}": {"get": _op(
+                "Download a checkpoint file", "curator", params=[_RUN_ID, _CHECKPOINT], files=("application/octet-stream",),
+                errors={"404": "no such run, or no checkpoint of that name in it"})},
         },
         "components": {
             "securitySchemes": {
@@ -181,7 +238,11 @@ def openapi_document() -> dict[str, Any]:
                             "description": "Browser session; state-changing calls also need the X-CSRFToken header."},
             },
             "schemas": {
-                "Error": {"type": "object", "properties": {"error": {"type": "string"}, "status": {"type": "integer"}}},
+                "Error": {"type": "object", "required": ["error", "status"], "properties": {
+                    "error": {"type": "string"}, "status": {"type": "integer"},
+                    "field": {"type": "string", "description": "a launch's field at fault (with `reason`)"},
+                    "reason": {"type": "string"},
+                    "frame": {"description": "a review's 409: the frame as it is now", **_ref("ReviewItem")}}},
                 "User": {"type": "object", "properties": {"id": {"type": "integer"}, "name": {"type": "string"},
                                                           "role": {"enum": ["annotator", "curator", "admin"]}}},
                 "UserList": _list("User"),
@@ -236,6 +297,14 @@ def openapi_document() -> dict[str, Any]:
                 "SampleList": _list("Sample", **_PAGED),
                 "SampleDecision": {"type": "object", "required": ["decision"], "properties": {
                     "decision": {"enum": ["accept", "reject"]}, "reason": {"type": "string"}}},
+                "LeaseRelease": {"type": "object", "properties": {
+                    "frame_id": {"type": "integer"}, "released": {"type": "boolean"},
+                    "reason": {"type": "string", "description": "why nothing was released"}}},
+                "FrameState": {"type": "object", "properties": {"frame_id": {"type": "integer"},
+                                                                "state": {"type": "string"}}},
+                "AnnotationSaved": {"type": "object", "properties": {
+                    "frame_id": {"type": "integer"}, "annotation_version": {"type": "integer"},
+                    "submitted": {"type": "boolean"}, "state": {"type": "string", "description": "the frame's"}}},
                 "Lease": {"type": "object", "properties": {"frame_id": {"type": "integer"},
                                                            "lease_expires": {"type": "string", "format": "date-time"}}},
                 "FrameDetail": {"allOf": [_ref("Frame"), {"type": "object", "properties": {

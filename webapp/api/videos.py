@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
-from flask import g, request
+from flask import abort, g, request
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
 from sqlalchemy import func, select
@@ -20,6 +21,7 @@ from dataset.services.prefilter import launch_prefilter
 from dataset.services.validate import db_int
 from webapp.api.blueprint import api, cursor_args, int_arg, json_body
 from webapp.auth import requires
+from webapp.bodies import MIB, size_text
 from webapp.jobs.queue import check_reachable, queue_for
 from webapp.runtime import runtime
 
@@ -49,6 +51,13 @@ def upload_video() -> ResponseReturnValue:
     ext = Path(name).suffix.lower()
     if ext not in VIDEO_EXTENSIONS:
         raise InvalidInput(f"{name}: not a video file name (expected one of {', '.join(sorted(VIDEO_EXTENSIONS))})")
+    rt = runtime()
+    upload.stream.seek(0, os.SEEK_END)
+    size = upload.stream.tell()
+    # The request's own limit allows for the form around the file: this one is the file's, exactly.
+    if size > rt.settings.max_upload_mb * MIB:
+        abort(413, f"{name} is {size_text(size)}; uploads take at most {rt.settings.max_upload_mb} MiB (max_upload_mb)")
+    upload.stream.seek(0)
     head = upload.stream.read(16)
     upload.stream.seek(0)
     if kind := image_kind(head):
@@ -63,7 +72,6 @@ def upload_video() -> ResponseReturnValue:
                            illusion_types=request.form.getlist("illusion_type"),
                            dedup_hamming=DEFAULT_DEDUP_HAMMING, user_id=current_user.id, original_name=name,
                            prefilter=request.form.get("prefilter", "1") not in ("0", "false", ""))
-    rt = runtime()
     # Before the file is stored: a request refused with 503 leaves nothing behind.
     check_reachable(rt.queue.hueys[queue_for("ingest")])
     key = rt.media.put_stream(upload.stream, ext)

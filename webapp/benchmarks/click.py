@@ -2,7 +2,7 @@
 embedding, for the classical backend and SAM2 (default hiera-tiny architecture, random weights),
 beside the same clicks answered in-process (the reference: what HTTP, JSON and RLE add).
 
-A real server (`illusion-studio serve`, waitress) in its own process, a real database and media
+A real server (`illusion-studio serve`: cheroot, webapp.server) in its own process, a real database and media
 store in a temp workspace, and clicks placed as a careful annotator would (``person_click``).
 SAM2 with random weights answers with noisy masks whose RLE is far larger than a trained
 model's (see ``response_kb_p50``), so its HTTP figure is an upper bound.

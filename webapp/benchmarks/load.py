@@ -6,7 +6,7 @@ The workspace is one synthetic video ingested as the real job does, half its fra
 annotators' queue) and half prefiltered (the curators' grid). Curators approve frames into the
 annotators' queue, reject some and send rejected ones back; annotators click, save drafts, give most
 frames back for someone else to finish and submit the rest, which the worker then generates. The
-server (waitress) and the worker run in processes of their own; the clients are threads here, each
+server (cheroot, webapp.server) and the worker run in processes of their own; the clients are threads here, each
 with its own connection, all on 127.0.0.1. SQLite by default, PostgreSQL and Redis when given.
 """
 

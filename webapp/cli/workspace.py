@@ -5,7 +5,7 @@ from __future__ import annotations
 import logging
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import click
 
@@ -13,6 +13,9 @@ from dataset.db import migrate
 from dataset.settings import Settings, SettingsError, load_settings
 from webapp.cli.state import CliState, pass_state
 from webapp.runtime import Runtime
+
+if TYPE_CHECKING:
+    from webapp.server import Server
 
 
 def init_workspace(data_dir: Path | None) -> Settings:
@@ -47,7 +50,7 @@ def _redact(url: str) -> str:
 @click.option("--threads", default=8, show_default=True, type=click.IntRange(1, 128))
 @pass_state
 def serve(state: CliState, host: str | None, port: int | None, threads: int) -> None:
-    """Run the web app with waitress."""
+    """Run the web app with cheroot."""
     _serve(state, host, port, threads)
 
 
@@ -57,30 +60,21 @@ def _serve(state: CliState, host: str | None, port: int | None, threads: int) ->
     server.run()
 
 
-def make_server(settings: Settings, rt: Runtime, host: str | None, port: int | None, threads: int) -> Any:
-    """The app under waitress, listening on ``host:port`` (default: the settings'; port 0: any free
-    one); connections wait in the backlog until ``run()``."""
-    import waitress
-
+def make_server(settings: Settings, rt: Runtime, host: str | None, port: int | None, threads: int) -> Server:
+    """The app's server, listening on ``host:port`` (default: the settings'; port 0: any free one);
+    connections wait in the backlog until ``run()``; ``close()`` stops it."""
     from webapp.app import create_app
+    from webapp.server import Server
+    from webapp.throttle import size_for_server
 
-    logging.basicConfig()  # waitress reports through logging, as waitress.serve sets it up
-    return waitress.create_server(create_app(settings, rt), host=host or settings.host,
-                                  port=settings.port if port is None else port, **waitress_options(settings, threads))
-
-
-def waitress_options(settings: Settings, threads: int) -> dict[str, Any]:
-    """waitress's settings from the workspace's. Its body limit sits a little above the app's, so that
-    the app, not waitress's plain-text page, answers an upload just over ``max_upload_mb`` (JSON for
-    the API); a body far over it waitress refuses from its Content-Length, before reading it."""
-    from webapp.app import SERVER_SLACK_BYTES, request_body_limit
-
-    return {"threads": threads, "ident": "illusion-studio",
-            "max_request_body_size": request_body_limit(settings) + SERVER_SLACK_BYTES}
+    logging.basicConfig()  # the app's modules report through logging
+    size_for_server(threads)  # slowed logins may hold at most half of these threads
+    return Server(create_app(settings, rt), host or settings.host, settings.port if port is None else port, threads)
 
 
-def server_url(server: Any) -> str:
-    return f"http://{server.effective_host}:{server.effective_port}/"
+def server_url(server: Server) -> str:
+    host = server.effective_host
+    return f"http://[{host}]:{server.effective_port}/" if ":" in host else f"http://{host}:{server.effective_port}/"
 
 
 @click.command()

@@ -1,0 +1,118 @@
+"""A flood of slowed logins from one address keeps no one else out (issue 28).
+
+The served app, real connections: 16 of them post slowed logins (fresh names, wrong passwords) from
+one address whose failures, and the admin account's, are past their slow-down limits. Meanwhile the
+admin's right password from an address that has not been guessing gets in within
+``login_slowdown_max_s`` + 1 s, and other routes keep answering — whether the app sees its
+clients' own addresses (127.0.0.x here) or, behind a reverse proxy named in ``trusted_proxies``,
+the addresses the proxy reports in X-Forwarded-For.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+import uuid
+from collections import Counter
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import httpx
+import pytest
+
+from dataset.db import migrate, transaction
+from dataset.models import Role
+from dataset.services import users as user_service
+from tests.conftest import PASSWORD, csrf_from, make_settings
+from webapp.cli.workspace import make_server, server_url
+from webapp.runtime import Runtime
+
+MAX_S = 1.0  # login_slowdown_max_s
+FLOOD = 16  # the attacker's connections
+THREADS = 8  # the server's, as `serve` starts it
+
+
+@dataclass(frozen=True)
+class Served:
+    url: str
+    proxied: bool  # behind a trusted proxy: every connection comes from 127.0.0.1, X-Forwarded-For says who
+
+    def client(self, address: str) -> httpx.Client:
+        """A client whose requests the app counts as coming from ``address``."""
+        if self.proxied:
+            return httpx.Client(base_url=self.url, headers={"X-Forwarded-For": address}, timeout=30)
+        return httpx.Client(base_url=self.url, transport=httpx.HTTPTransport(local_address=address), timeout=30)
+
+
+@pytest.fixture(params=["direct", "proxy"])
+def served(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Served]:
+    """The app under `serve`'s server with small limits: a name's 2nd failure and an address's 4th start the slow-down."""
+    proxied = request.param == "proxy"
+    settings = make_settings(tmp_path / "ws", login_limit_per_account_address="3 per 15 minutes",
+                             login_slowdown_per_account="2 per 15 minutes", login_slowdown_per_address="4 per 15 minutes",
+                             login_slowdown_max_s=MAX_S, **({"trusted_proxies": ["127.0.0.1/32"]} if proxied else {}))
+    migrate(settings.database_url)
+    rt = Runtime(settings)
+    with transaction(rt.sessions) as s:
+        user_service.create_user(s, "admin", Role.admin, PASSWORD)
+    server = make_server(settings, rt, "127.0.0.1", 0, threads=THREADS)
+    threading.Thread(target=server.run, daemon=True).start()
+    try:
+        yield Served(server_url(server).rstrip("/"), proxied)
+    finally:
+        server.close()
+        rt.close()
+
+
+def addresses(served: Served) -> tuple[str, str]:
+    """(the attacker's, the owner's) address."""
+    return ("203.0.113.9", "198.51.100.7") if served.proxied else ("127.0.0.9", "127.0.0.7")
+
+
+def post_login(client: httpx.Client, token: str, name: str, password: str) -> int:
+    return client.post("/login", data={"name": name, "password": password, "csrf_token": token}).status_code
+
+
+def login_token(client: httpx.Client) -> str:
+    return csrf_from(client.get("/login").text)
+
+
+def test_a_flood_of_slowed_logins_from_one_address_keeps_neither_the_owner_nor_other_routes_out(served: Served) -> None:
+    attacker, owner = addresses(served)
+    with served.client(attacker) as setup:
+        token = login_token(setup)
+        # the admin account past its slow-down, then the attacker's address past its own
+        for name in ("admin", "admin", "x1", "x2"):
+            assert post_login(setup, token, name, "wrong-password") == 401
+
+    stop = threading.Event()
+    answers: Counter[int] = Counter()
+
+    def flood() -> None:
+        with served.client(attacker) as client:
+            flood_token = login_token(client)
+            while not stop.is_set():
+                answers[post_login(client, flood_token, uuid.uuid4().hex[:12], "wrong-password")] += 1
+
+    threads = [threading.Thread(target=flood, daemon=True) for _ in range(FLOOD)]
+    for thread in threads:
+        thread.start()
+    try:
+        time.sleep(2 * MAX_S)  # the attacker's waits have grown to their longest
+        for _ in range(3):
+            with served.client(owner) as admin:
+                token = login_token(admin)
+                started = time.monotonic()
+                status = post_login(admin, token, "admin", PASSWORD)
+                took = time.monotonic() - started
+            assert status == 302 and took <= MAX_S + 1, (status, took, answers)
+            with served.client(owner) as other:
+                started = time.monotonic()
+                assert other.get("/healthz").status_code == 200
+                assert time.monotonic() - started < 1, answers
+    finally:
+        stop.set()
+        for thread in threads:
+            thread.join(timeout=10)
+    assert set(answers) <= {401, 429} and answers[401] and answers[429], answers  # slowed, and refused past the cap
