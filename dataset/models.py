@@ -520,3 +520,20 @@ class Proposal(Base):
     decided_at: Mapped[datetime | None]
 
     scan: Mapped[ProposalScan] = relationship(back_populates="proposals")
+
+
+class Export(Base):
+    """A dataset export made from the web: its job writes ``<home>/exports/<id>``, and the page offers
+    that folder as one zip until a curator deletes it or it outlives ``export_retention_days``."""
+
+    __tablename__ = "exports"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    job_id: Mapped[int | None] = mapped_column(ForeignKey("jobs.id", ondelete="SET NULL"))
+    options: Mapped[dict[str, Any]] = mapped_column(
+        default=dict, doc="What was asked: format, split, seed, states, video_ids, mask_format.")
+    created_by_id: Mapped[int | None] = mapped_column(ForeignKey("users.id", ondelete="SET NULL"))
+    created_at: Mapped[datetime] = mapped_column(default=utcnow, index=True)
+
+    job: Mapped[Job | None] = relationship()
+    created_by: Mapped[User | None] = relationship()

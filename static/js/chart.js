@@ -3,7 +3,7 @@
 import { formatNumber } from "./labels.js";
 
 const NS = "http://www.w3.org/2000/svg";
-const W = 640, H = 220, PAD = { left: 56, right: 12, top: 22, bottom: 28 };
+const W = 640, H = 230, PAD = { left: 56, right: 12, top: 22, bottom: 38 };
 export const COLORS = ["#4f46e5", "#dc2626", "#059669", "#d97706", "#0891b2", "#7c3aed", "#be185d", "#4b5563"];
 
 function svg(tag, attrs = {}, text) {
@@ -13,22 +13,38 @@ function svg(tag, attrs = {}, text) {
   return node;
 }
 
-// Round values between lo and hi, about n of them; whole numbers only when `integer` (steps).
-export function ticks(lo, hi, n = 4, { integer = false } = {}) {
-  if (!(hi > lo)) return [lo];
+// A round step for about n ticks between lo and hi; whole when `integer` (steps).
+function tickStep(lo, hi, n, integer) {
   const raw = (hi - lo) / n;
   const mag = 10 ** Math.floor(Math.log10(raw));
   const nice = [1, 2, 5, 10].map((m) => m * mag).find((s) => s >= raw) ?? raw;
-  const step = integer ? Math.max(1, Math.round(nice)) : nice;
+  return integer ? Math.max(1, Math.round(nice)) : nice;
+}
+
+// Round values between lo and hi, about n of them; whole numbers only when `integer` (steps).
+export function ticks(lo, hi, n = 4, { integer = false } = {}) {
+  if (!(hi > lo)) return [lo];
+  const step = tickStep(lo, hi, n, integer);
   const out = [];
   for (let v = Math.ceil(lo / step) * step; v <= hi + step * 1e-9; v += step) out.push(v);
   return out;
 }
 
+// A value axis over [lo, hi] widened to the round ticks around it: ticks at both ends, and at least
+// three (the range spans at least 1.6 steps, so the widened ends are two or more steps apart).
+export function niceAxis(lo, hi, n = 4) {
+  if (!(hi > lo)) return { lo, hi, ticks: [lo] };
+  const step = tickStep(lo, hi, n, false);
+  const [first, last] = [Math.floor(lo / step), Math.ceil(hi / step)];
+  const ticks = Array.from({ length: last - first + 1 }, (_, i) => (first + i) * step);
+  return { lo: ticks[0], hi: ticks.at(-1), ticks };
+}
+
 const label = (v) => formatNumber(v, 3);
 
-// A chart in `container`; `update(series)` draws [{name, color, points: [[step, value], …]}].
-export function lineChart(container, { title, yLabel = "" }) {
+// A chart in `container`; `update(series)` draws [{name, color, points: [[step, value], …]}] against
+// the x axis named `xLabel`.
+export function lineChart(container, { title, yLabel = "", xLabel = "step" }) {
   const root = svg("svg", { viewBox: `0 0 ${W} ${H}`, class: "chart", role: "img", "aria-label": title });
   container.append(root);
   return {
@@ -46,15 +62,19 @@ export function lineChart(container, { title, yLabel = "" }) {
       let [y0, y1] = [Math.min(...all.map((p) => p[1])), Math.max(...all.map((p) => p[1]))];
       if (x1 === x0) { x0 -= 1; x1 += 1; }
       if (y1 === y0) { const d = Math.abs(y0) * 0.1 || 1; y0 -= d; y1 += d; }
+      const yAxis = niceAxis(y0, y1);
+      [y0, y1] = [yAxis.lo, yAxis.hi];
       const sx = (x) => PAD.left + ((x - x0) / (x1 - x0)) * (W - PAD.left - PAD.right);
       const sy = (y) => H - PAD.bottom - ((y - y0) / (y1 - y0)) * (H - PAD.top - PAD.bottom);
-      for (const t of ticks(y0, y1)) {
+      for (const t of yAxis.ticks) {
         root.append(svg("line", { x1: PAD.left, x2: W - PAD.right, y1: sy(t), y2: sy(t), class: "chart-grid" }),
                     svg("text", { x: PAD.left - 6, y: sy(t) + 4, "text-anchor": "end", class: "chart-tick" }, label(t)));
       }
       for (const t of ticks(x0, x1, 6, { integer: true })) {
-        root.append(svg("text", { x: sx(t), y: H - 8, "text-anchor": "middle", class: "chart-tick" }, label(t)));
+        root.append(svg("text", { x: sx(t), y: H - PAD.bottom + 14, "text-anchor": "middle", class: "chart-tick" }, label(t)));
       }
+      root.append(svg("text", { x: (PAD.left + W - PAD.right) / 2, y: H - 4, "text-anchor": "middle", class: "chart-axis" },
+                      xLabel));
       finite.forEach((s, i) => {
         const color = s.color ?? COLORS[i % COLORS.length];
         const d = s.points.map(([x, y], k) => `${k ? "L" : "M"}${sx(x).toFixed(1)},${sy(y).toFixed(1)}`).join("");

@@ -23,8 +23,10 @@ function tables(shortcuts) {
 // shortcuts: [[keys, what they do]], with a heading (a string) before each group where a page has
 // many; note: a line under the table (mouse use, say).
 export function keyboardHelp(shortcuts, { note = "" } = {}) {
+  // Opening focuses the title (autofocus): else the first focusable element, Close at the bottom, took
+  // the focus and scrolled a help taller than the window (Annotate's) past its title.
   const dialog = el("dialog", { id: "keys-help", className: "keys-help" },
-    el("h2", { id: "keys-help-title" }, "Keyboard shortcuts"),
+    el("h2", { id: "keys-help-title", tabIndex: -1, autofocus: true }, "Keyboard shortcuts"),
     el("div", { className: "keys-groups" }, ...tables([...shortcuts, ["`?`", "this help"]])),
     note ? el("p", { className: "muted" }, note) : "",
     el("form", { method: "dialog" }, el("button", {}, "Close")));
@@ -36,6 +38,11 @@ export function keyboardHelp(shortcuts, { note = "" } = {}) {
     if (dialog.open) dialog.close();
     else dialog.showModal();
   });
-  for (const button of document.querySelectorAll("[data-help]")) button.addEventListener("click", () => dialog.showModal());
+  // The page's `?` button goes to the top bar's slot (base.html), so it is in one place on every page.
+  const slot = document.querySelector(".topbar .help-slot");
+  for (const button of document.querySelectorAll("[data-help]")) {
+    slot?.append(button);
+    button.addEventListener("click", () => dialog.showModal());
+  }
   return dialog;
 }

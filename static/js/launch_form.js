@@ -13,23 +13,38 @@ function noteFor(form, field) {
   return form.querySelector(`[data-error-for="${CSS.escape(field.split(".")[0])}"]`);
 }
 
+// `reason` under the field's note; the field marked and brought into view.
+function refuse(note, reason) {
+  note.textContent = reason;
+  note.hidden = false;
+  const input = note.closest("label")?.querySelector("input, select");
+  input?.setAttribute("aria-invalid", "true");
+  (input ?? note).scrollIntoView({ block: "center" });
+}
+
+// A number field holding text the browser cannot read as a number ("1e", "--2") has the value "", as an
+// empty one has, which would launch with the preset's value: refused under the field instead.
+function refuseMalformed(form) {
+  const bad = [...form.querySelectorAll("input[type=number]")].find((input) => input.validity.badInput);
+  const note = bad && noteFor(form, bad.name);
+  if (note) refuse(note, "not a number: write it like 2000, 0.0004 or 4e-4 (empty: the preset's value)");
+  return Boolean(note);
+}
+
 // Resolves to the API's answer, or to null when refused (the reason is then on the form).
 export async function launch(form, body) {
   const summary = form.querySelector(".flash.error");
   const button = form.querySelector("button[type=submit]");
   clear(form);
   summary.hidden = true;
+  if (refuseMalformed(form)) return null;
   button.disabled = true;
   try {
     return await api(form.dataset.src, { method: "POST", body });
   } catch (err) {
     const note = err.field ? noteFor(form, err.field) : null;
     if (note) {
-      note.textContent = err.reason ?? err.message;
-      note.hidden = false;
-      const input = note.closest("label")?.querySelector("input, select");
-      input?.setAttribute("aria-invalid", "true");
-      (input ?? note).scrollIntoView({ block: "center" });
+      refuse(note, err.reason ?? err.message);
     } else {
       summary.textContent = err.message;
       summary.hidden = sessionEnded(err);

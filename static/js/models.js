@@ -1,7 +1,7 @@
 // The runs table (refreshed every two seconds, rows pickable for comparison) and the admins'
 // launch form, which posts to the API and opens the new run's page.
 import { api, el, poll } from "./api.js";
-import { duration, fixed, runUrl } from "./runs.js";
+import { LIVE, duration, fixed, runUrl } from "./runs.js";
 import { keyboardHelp } from "./help.js";
 import { launch, numberOrNull } from "./launch_form.js";
 
@@ -9,6 +9,7 @@ const root = document.getElementById("models");
 const table = document.getElementById("runs");
 const compare = document.getElementById("compare");
 const form = document.getElementById("launch");
+const estimate = document.getElementById("launch-estimate");
 const picked = new Set();
 
 function row(run) {
@@ -17,7 +18,7 @@ function row(run) {
   const link = el("a", { href: runUrl(root.dataset.runPage, run.run) }, `#${run.run}`);
   const state = el("span", { className: `state ${run.state}` }, run.state);
   return el("tr", { dataset: { runId: run.run, state: run.state } },
-    el("td", {}, pick), el("td", {}, link, run.current ? el("span", { className: "badge current" }, " current") : ""),
+    el("td", {}, pick), el("td", {}, link, ...(run.current ? [" ", el("span", { className: "badge current" }, "current")] : [])),
     el("td", {}, state),
     el("td", {}, el("progress", { max: 1, value: run.progress }), ` ${run.step}/${run.steps}`),
     el("td", {}, run.preset), el("td", {}, el("code", { title: run.dataset.id }, run.dataset.id.slice(0, 12))),
@@ -68,12 +69,76 @@ function launchBody() {
   return body;
 }
 
+// {preset: {steps, batch, lr, crop, iters}} where the page is given them, else {}.
+const presets = form?.dataset.presets ? JSON.parse(form.dataset.presets) : {};
+const PRESET_FIELDS = ["steps", "batch", "lr", "crop", "iters"];
+
+// Each empty field's placeholder names the value the launch will take: the chosen preset's.
+function showPresetValues() {
+  const name = form.elements.preset.value;
+  for (const field of PRESET_FIELDS) {
+    const value = presets[name]?.[field];
+    const says = value == null ? "preset's" : `${value} (${name}'s)`;
+    form.elements[field].placeholder = field === "crop" ? `${says}; ${form.dataset.fits} fits the accepted samples` : says;
+  }
+}
+
+const cropText = (text) => text.replace(/\s/g, "").replace(/[X×]/, "x");
+const median = (values) => {
+  const sorted = [...values].sort((a, b) => a - b);
+  const mid = sorted.length >> 1;
+  return sorted.length % 2 ? sorted[mid] : (sorted[mid - 1] + sorted[mid]) / 2;
+};
+
+// A finished run's median step time in seconds (batch / samples per s over its curve's points), kept
+// once known: what it was does not change.
+const stepTimes = new Map();
+async function medianStepTime(runId) {
+  if (!stepTimes.has(runId)) {
+    const url = runUrl(root.dataset.runApi, runId);
+    const [run, points] = await Promise.all([api(url), api(`${url}/metrics?after=-1&after_val=2147483647`)]);
+    const batch = run.config?.train?.batch_size;
+    const times = points.step.filter((p) => p.samples_per_s > 0).map((p) => batch / p.samples_per_s);
+    const crop = run.config?.train?.crop;
+    stepTimes.set(runId, { crop: crop ? crop.join("x") : null, seconds: batch && times.length ? median(times) : null });
+  }
+  return stepTimes.get(runId);
+}
+
+// "about 3 min 20 s" from the median step time of the newest run with the same preset and crop, else unknown.
+let asked = 0;
+async function showEstimate() {
+  const ask = ++asked;
+  const name = form.elements.preset.value;
+  const steps = numberOrNull(form.elements.steps) ?? presets[name]?.steps;
+  const crop = cropText(form.elements.crop.value) || presets[name]?.crop;
+  let text = "unknown: type the steps and the crop to compare with earlier runs";
+  if (typeof steps === "number" && crop) {
+    text = `unknown: no earlier ${name} run with crop ${crop} has step times`;
+    const { items } = await api(root.dataset.src);
+    for (const run of items.filter((r) => r.preset === name && r.step > 0 && !LIVE.has(r.state))) {
+      const { crop: runCrop, seconds } = await medianStepTime(run.run);
+      if (runCrop !== crop || seconds == null) continue;
+      text = `about ${duration(seconds * steps)} (${steps} steps × ${seconds.toFixed(2)} s, the median step of run ${run.run}, ` +
+        `same preset and crop)`;
+      break;
+    }
+  }
+  if (ask === asked) estimate.textContent = `Estimated length: ${text}.`;
+}
+
 if (form) {
   // The data source shows the fields of the chosen one: the database's filters or a registered folder.
   const showSource = () => {
     for (const part of form.querySelectorAll("[data-source]")) part.hidden = part.dataset.source !== form.elements.source.value;
   };
   for (const radio of form.elements.source) radio.addEventListener("change", showSource);
+  form.elements.preset.addEventListener("change", showPresetValues);
+  for (const name of ["preset", "steps", "crop"]) {
+    form.elements[name].addEventListener("input", () => showEstimate().catch(console.warn));
+  }
+  showPresetValues();
+  showEstimate().catch(console.warn);
   form.addEventListener("submit", async (event) => {
     event.preventDefault();
     const run = await launch(form, launchBody());
@@ -84,7 +149,9 @@ if (form) {
 keyboardHelp([], {
   note: "Tick two or more runs to compare their curves. Launch fields left empty take the preset's values; a " +
     "refused launch names its field under it (a crop must fit the smallest image of the data and the machine's " +
-    "memory). Start from a run's best or last checkpoint to fine-tune.",
+    "memory; text that is not a number is refused too). The estimate above Launch is the steps times the median " +
+    "step time of the newest finished run with the same preset and crop. Start from a run's best or last " +
+    "checkpoint to fine-tune.",
 });
 
 poll(refresh, 2000);

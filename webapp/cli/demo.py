@@ -41,6 +41,11 @@ DEMO_PASSWORD = "{role}-demo"
 DEMO_TRAIN = {"train.steps": 40, "train.batch_size": 2, "train.crop": (96, 192), "train.val_every": 20,
               "train.checkpoint_every": 20}
 POLL_S = 2.0
+# Shown on the run's page: what the demo's run is for, how long it takes, and that its model is no use.
+DEMO_RUN_NOTE = (f"The demo's toy run: {DEMO_TRAIN['train.steps']} steps of the lite preset on the demo's few samples, "
+                 "so that the Models and Evaluation pages have something to show. It takes under a minute on a quiet "
+                 "2-core machine and a quarter of an hour on a busy one; its model is a toy (expect a validation bad-2 "
+                 "near 100 %). For a model worth using, accept more samples and launch a longer run.")
 
 
 @click.command()
@@ -241,6 +246,7 @@ def _launch_demo_run(rt: Runtime) -> int | None:
             run = run_control.launch(rt, s, preset="lite", overrides=DEMO_TRAIN, selection=training.DataSelection(),
                                      launch=training.Launch(split=training.parse_split(training.DEFAULT_SPLIT)),
                                      user=s.get(User, admin.id))
+            run.launch = {**run.launch, "note": DEMO_RUN_NOTE}
             run_id = run.id
     except ServiceError as exc:
         click.echo(f"no demo training run: {exc}", err=True)

@@ -7,11 +7,14 @@ from pathlib import Path
 
 import click
 
-from dataset.export import FORMATS, export_params, import_params
+from dataset.export import FORMATS, LayoutError, export_params, import_params
 from dataset.export.authors_layout import MASK_FORMATS
 from dataset.export.selection import DEFAULT_STATES
 from dataset.export.splits import DEFAULT_SPLIT
+from dataset.export.staging import check_target
 from dataset.models import SampleState
+from dataset.services.errors import FieldError
+from dataset.services.exports import check_selection
 from webapp.cli.errors import service_errors
 from webapp.cli.running import run_job, run_options
 from webapp.cli.state import CliState, pass_state
@@ -36,8 +39,19 @@ def export_cmd(state: CliState, out: Path, fmt: str, split: str, seed: int, stat
                video_ids: tuple[int, ...], mask_format: str, overwrite: bool, wait: bool, here: bool) -> None:
     """Export samples into the new folder OUT (written aside and renamed into place when complete)."""
     with service_errors():
+        try:
+            check_target(out.absolute(), overwrite=overwrite)
+        except LayoutError as exc:
+            # The check's words serve the web too; on the command line the way out has a flag's name.
+            raise LayoutError(str(exc) if overwrite else f"{exc} (--overwrite)") from None
         params = export_params(out, format=fmt, split=split, seed=seed, states=states or DEFAULT_STATES,
                                video_ids=video_ids, overwrite=overwrite, mask_format=mask_format)
+        # Refused here rather than as a failed job: videos that do not exist, a selection of no sample.
+        with state.runtime.sessions() as session:
+            try:
+                check_selection(session, params["states"], params["video_ids"])
+            except FieldError as exc:  # its field is the form's; here the option's
+                raise click.ClickException(f"--video: {exc.reason}" if exc.field else exc.reason) from None
     run_job(state, "export", params, f"export {fmt} → {params['out']}", wait=wait, here=here)
 
 

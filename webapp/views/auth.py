@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+from datetime import datetime, timedelta
 from urllib.parse import urlsplit
 
-from flask import Blueprint, current_app, flash, g, redirect, render_template, request, send_from_directory, url_for
+from flask import Blueprint, current_app, flash, g, redirect, render_template, request, send_from_directory, session, url_for
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
 from sqlalchemy import select
 
-from dataset.models import Role
+from dataset.models import Role, utcnow
 from dataset.services import users as user_service
+from dataset.services.session_reasons import why_session_ended
 from dataset.wording import plural
 from webapp.auth import public, requires, sign_in, sign_out
 from webapp.forms import LoginForm
@@ -18,6 +20,9 @@ from webapp.runtime import runtime
 from webapp.throttle import LoginCounters
 
 bp = Blueprint("auth", __name__)
+# The cookie's note of when this browser logged in: once its session has ended, why it ended is told
+# from what happened to the account since (the session's own row is gone by then).
+SIGNED_IN_AT = "signed_in_at"
 
 
 @bp.get("/healthz")
@@ -56,11 +61,35 @@ def login() -> ResponseReturnValue:
         if user is not None:
             counters.succeeded()
             sign_in(user)
+            session[SIGNED_IN_AT] = utcnow().isoformat()
             return redirect(_safe_next(request.args.get("next")))
         counters.failed()
         flash("Wrong user name or password.", "error")
         return render_template("login.html", form=form), 401
-    return render_template("login.html", form=form)
+    return render_template("login.html", form=form, ended=ended_reason())
+
+
+@bp.get("/login/ended")
+@public
+def session_ended() -> ResponseReturnValue:
+    """``{"reason", "then"}``: why this browser's session ended and what to do (nulls when it had none or
+    the server cannot tell); an open tab asks when a request of its own was refused (static/js/session_banner.js)."""
+    reason, then = ended_reason() or (None, None)
+    return {"reason": reason, "then": then}
+
+
+def ended_reason() -> tuple[str, str] | None:
+    """Why this browser's session ended and what to do: its cookie still names the user it was
+    logged in as and when, but the session is gone."""
+    user_id, since = session.get("_user_id"), session.get(SIGNED_IN_AT)
+    if current_user.is_authenticated or not user_id or not since:
+        return None
+    try:
+        user, signed_in_at = int(user_id), datetime.fromisoformat(since)
+    except (TypeError, ValueError):
+        return None
+    lifetime = timedelta(hours=runtime().settings.session_lifetime_hours)
+    return why_session_ended(g.db, user, signed_in_at, lifetime=lifetime)
 
 
 def _safe_next(target: str | None) -> str:
