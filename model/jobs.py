@@ -6,22 +6,29 @@ No torch import here (the handler table loads eagerly, and torch lives in the tr
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import os
 import socket
+import threading
 import time
 from collections import deque
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
+from sqlalchemy.orm import Session
+
 from dataset.db import transaction
-from dataset.models import Job, RunState, utcnow
+from dataset.models import Job, JobState, RunState, TrainingRun, utcnow
 from dataset.services import training
 from dataset.services.errors import FieldError, InvalidInput, ServiceError
 from dataset.services.jobs import JobContext
 from model.evaluation import evaluate_job
 from model.fit import check_worker
+from model.launch import backbone_dirs
 from model.launcher import (
+    STOP_GRACE_S,
     ProcessGroup,
     clear_stop,
     death_reason,
@@ -33,15 +40,52 @@ from model.launcher import (
     torchrun_command,
 )
 from model.presets import PRESETS, Config, load_preset
+from model.train.spec import BACKBONES, read_run, with_backbones
 
 POLL_S = 1.0
 CANCEL_GRACE_FLOOR_S = 30.0  # before the first step there is no timing; loading may take this long
 OUTPUT_TAIL = 400  # lines of the trainers' output kept for torchrun's failure summary
+EXIT_MARGIN_S = 30.0  # an exiting worker's wait for a train job, past the job's own stopping: its last writes
 __all__ = ["evaluate_job", "train_job", "resolve_config"]
 
 
 class RunEnded(ServiceError):
-    """A run that ended without succeeding: cancelled, diverged or failed (the message says which and why)."""
+    """A run that ended without succeeding: cancelled, diverged, failed or interrupted (the message says which and why)."""
+
+
+class _Exiting:
+    """This process is exiting while train jobs supervise trainers. A worker's SIGTERM (a deploy)
+    ends its queue consumer without waiting for running jobs; the interpreter then runs its exit
+    hooks while the job threads, daemon threads, still run. The hook raises :attr:`event`: each job
+    stops its trainers as a cancel does (they write the checkpoint of the step they stopped at) and
+    records the run as interrupted, and the process waits for them before it goes."""
+
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self._lock = threading.Lock()
+        self._jobs: dict[int, tuple[threading.Event, Timing]] = {}
+
+    @contextlib.contextmanager
+    def supervising(self, job_id: int, timing: Timing) -> Iterator[None]:
+        """While a job supervises trainers (``timing``: theirs, for the grace they get)."""
+        done = threading.Event()
+        with self._lock:
+            self._jobs[job_id] = (done, timing)
+        try:
+            yield
+        finally:
+            with self._lock:
+                del self._jobs[job_id]
+            done.set()
+
+    def wait_for_jobs(self) -> None:
+        """Raise :attr:`event`, then wait for every job to let its trainers go (bounded by their grace)."""
+        self.event.set()
+        with self._lock:
+            jobs = list(self._jobs.values())
+        for done, timing in jobs:
+            # The job signals the group past its grace, and SIGKILLs it STOP_GRACE_S later.
+            done.wait(timing.grace_s() + STOP_GRACE_S + EXIT_MARGIN_S)
 
 
 def resolve_config(preset: str, overrides: dict[str, Any]) -> dict[str, Any]:
@@ -59,7 +103,8 @@ def train_job(ctx: JobContext) -> dict[str, Any]:
 
     Whatever ends this handler (the run's end, an exception such as a database error, the worker's
     shutdown) ends the trainers' whole process group before it returns; a worker SIGKILLed meanwhile
-    is covered by the trainers' ``--watch-pid``.
+    is covered by the trainers' ``--watch-pid``. A worker that exits while the run trains (SIGTERM)
+    has its trainers checkpoint where they stop, and the run is interrupted: a resume goes on from there.
     """
     run_id = int(ctx.params["run_id"])
     runs_dir = ctx.settings.runs_dir
@@ -68,36 +113,78 @@ def train_job(ctx: JobContext) -> dict[str, Any]:
         run = training.start_attempt(s, run_id, ctx.job_id)
         launch, offset, config = dict(run.launch), run.progress_offset, Config.from_dict(run.config)
     try:  # the launch was checked against the serving machine; any train worker may have claimed it
-        check_worker(config, launch, ctx.settings)
+        backbones = preflight(config, launch, directory, ctx.settings)
     except FieldError as exc:
         with transaction(ctx.sessions) as s:
             run = training.get_run(s, run_id)
             run.state, run.finished_at = RunState.failed, utcnow()
-            run.reason = f"does not fit train worker {socket.gethostname()}: {exc}"
+            run.reason = f"cannot start on train worker {socket.gethostname()}: {exc}"
         raise RunEnded(f"run {run_id} failed: {run.reason}") from None
     # A previous attempt's trainers (its worker died a moment ago) must not write beside this one.
     stop_recorded(directory)
     clear_stop(directory)
-    command = torchrun_command(directory, launch, watch_pid=os.getpid())
-    group = ProcessGroup(command, env_extra=device_env(launch.get("devices", "auto")))
+    command = torchrun_command(directory, launch, watch_pid=os.getpid(), backbones=backbones)
     timing = Timing()
-    try:
-        record_group(directory, group.pgid)
-        ctx.log(f"run {run_id}: trainers in process group {group.pgid}: {' '.join(command)}")
-        code, end, output = _supervise(ctx, run_id, directory, group, offset, timing)
-    finally:
-        if group.group_alive():  # an exception: let the ranks checkpoint if they can, then end them
-            _stop(ctx, run_id, directory, group, timing.grace_s())
-        forget_group(directory)
-        clear_stop(directory)  # a later `python -m model.train RUN_DIR` must not stop at its first step
-    with transaction(ctx.sessions) as s:
-        run = training.get_run(s, run_id)
-        state = training.finish_run(run, end, code, death_reason(code, output))
-        result = training.run_json(run, runs_dir)
+    with EXITING.supervising(ctx.job_id, timing):
+        group = ProcessGroup(command, env_extra=device_env(launch.get("devices", "auto")))
+        try:
+            record_group(directory, group.pgid)
+            ctx.log(f"run {run_id}: trainers in process group {group.pgid}: {' '.join(command)}")
+            code, end, output = _supervise(ctx, run_id, directory, group, offset, timing)
+        finally:
+            if group.group_alive():  # an exception: let the ranks checkpoint if they can, then end them
+                _stop(ctx, run_id, directory, group, timing.grace_s())
+            forget_group(directory)
+            clear_stop(directory)  # a later `python -m model.train RUN_DIR` must not stop at its first step
+        with transaction(ctx.sessions) as s:
+            run = training.get_run(s, run_id)
+            # Stopped with its worker (not by a cancel, not at the run's own end): resumable.
+            if EXITING.event.is_set() and not run.cancel_requested and (end is None or end.get("state") == "cancelled"):
+                state = _interrupted(s, run, end, ctx.job_id)
+            else:
+                state = training.finish_run(run, end, code, death_reason(code, output))
+            result = training.run_json(run, runs_dir)
     if state.value != "succeeded":
         raise RunEnded(f"run {run_id} {state.value}: {result['reason']}")
     return {"run": run_id, "step": result["step"], "checkpoint": result["checkpoint"],
             "best_val_epe": result["best_val_epe"]}
+
+
+def preflight(config: Config, launch: Mapping[str, Any], run_dir: Path, settings: Any) -> dict[str, str]:
+    """Check a run on this train worker before torchrun starts; the directories of its frozen
+    backbones here (this worker's settings), by model field. FieldError naming what stops it: a
+    backbone whose setting is not set or names no directory, the machine (``check_worker``), an
+    init checkpoint the engine could not start from (promote's checks, and the model config)."""
+    backbones = backbone_dirs(config, settings)
+    for field, weights, setting in BACKBONES:
+        if field in backbones and not Path(backbones[field]).is_dir():
+            raise FieldError("preset", f"the setting {setting} names no directory here (the {weights} weights)")
+    engine_config = with_backbones(config, backbones)
+    check_worker(engine_config, launch, settings)
+    try:
+        init = read_run(run_dir).init_checkpoint
+    except ValueError:  # the engine says what is wrong with run.json, in the run's end event
+        init = None
+    if init is not None:
+        from model.train.checkpoints import check_init  # torch, only for a run that starts from a checkpoint
+
+        try:
+            check_init(init, engine_config, label=str(launch.get("init_checkpoint") or init.name))
+        except ValueError as exc:
+            raise FieldError("init", str(exc)) from None
+    return backbones
+
+
+def _interrupted(session: Session, run: TrainingRun, end: dict[str, Any] | None, job_id: int) -> RunState:
+    """Record a run its worker stopped (see :class:`_Exiting`) as interrupted, and its job too, so
+    that ``runs resume`` (or ``jobs retry``) goes on from the checkpoint the trainers wrote."""
+    where = f" at step {end['step']}" if end is not None and end.get("step") is not None else ""
+    run.state, run.finished_at = RunState.interrupted, utcnow()
+    run.reason = f"the train worker stopped{where}; resume the run to go on from its last checkpoint"
+    job = session.get(Job, job_id)
+    # Set here, the job's row is no longer running, so the worker does not mark it failed after.
+    job.state, job.error, job.finished_at = JobState.interrupted, run.reason, utcnow()
+    return RunState.interrupted
 
 
 class Timing:
@@ -137,11 +224,12 @@ def _supervise(ctx: JobContext, run_id: int, directory: Path, group: ProcessGrou
         _relay(ctx, group, output)
         end, offset, cancel, events = _mirror(ctx, run_id, directory, offset, end)
         timing.see(events)
-        if cancel and deadline is None:
+        if (cancel or EXITING.event.is_set()) and deadline is None:
             request_stop(directory)
             grace = timing.grace_s()
             deadline = time.monotonic() + grace
-            ctx.log(f"run {run_id}: cancel requested; the trainers stop after this step and write its "
+            why = "cancel requested" if cancel else "the worker is stopping"
+            ctx.log(f"run {run_id}: {why}; the trainers stop after this step and write its "
                     f"checkpoint (process group {group.pgid} is signalled in {grace:.0f} s otherwise)")
         if code is None and deadline is not None and time.monotonic() > deadline:
             ctx.log(f"run {run_id}: the trainers did not stop in time; stopping process group {group.pgid}")
@@ -194,3 +282,7 @@ def _mirror(ctx: JobContext, run_id: int, directory: Path, offset: int,
     # Also the heartbeat of a `worker --burst` run, which has no heartbeat thread.
     ctx.progress(step / steps if steps else 0.0, message if any(e.get("event") == "val" for e in events) else None)
     return end, offset, cancel, events
+
+
+EXITING = _Exiting()
+atexit.register(EXITING.wait_for_jobs)

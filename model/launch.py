@@ -34,6 +34,8 @@ from dataset.settings import DATASET_ROOT_NAME
 from model.align import ALIGN_RULES
 from model.evaluate import RESOLUTIONS
 from model.methods import METHODS, NETWORK_METHODS, method_key
+from model.presets import Config, load_preset
+from model.train.spec import BACKBONES
 
 MAX_STEPS = 1_000_000  # 10× the paper's 100k
 MAX_BATCH = 256
@@ -111,6 +113,24 @@ def _settings(info: ValidationInfo) -> Any:
     return (info.context or {}).get("settings")
 
 
+def backbone_dirs(config: Config, settings: Any) -> dict[str, str]:
+    """The directories of the frozen backbones ``config``'s model loads, by config field, from
+    ``settings`` (``depth_model_path``, ``vlm_model_path``); FieldError on ``preset`` naming the first
+    setting that is not set. Whether each is a directory is the train worker's check, on its own."""
+    model = config.model
+    loads = {"mono_model_path": model.mono_backend == "depth-anything-v2",
+             "vlm_model_path": model.use_vlm and model.vlm_backend == "qwen2-vl"}
+    found = {}
+    for field, weights, setting in BACKBONES:
+        if loads[field]:
+            directory = getattr(settings, setting, None)
+            if not directory:
+                raise FieldError("preset", f"{config.preset} loads {weights} weights from the directory the setting "
+                                           f"{setting} names, and it is not set")
+            found[field] = str(directory)
+    return found
+
+
 class RunLaunch(_Strict):
     """A training run: preset and training overrides, processes and devices, data, start weights."""
 
@@ -168,6 +188,14 @@ class RunLaunch(_Strict):
         if self.data is not None and (self.video_ids or self.illusion_types or self.kinds or self.qa_ok):
             raise FieldError("data", "video, illusion type, kind and QA filters select from the database, "
                                      "not from a folder")
+        return self
+
+    @model_validator(mode="after")
+    def _weights_configured(self, info: ValidationInfo) -> RunLaunch:
+        # A preset whose backbones load from directories cannot start where no setting names them.
+        settings = _settings(info)
+        if settings is not None:
+            backbone_dirs(load_preset(self.preset), settings)
         return self
 
     def overrides(self) -> dict[str, Any]:

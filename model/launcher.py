@@ -1,6 +1,8 @@
-"""Starting the trainers with ``torchrun`` in a process group of their own, and stopping all of them.
+"""Starting the trainers with torchrun's agent in a process group of their own, and stopping all of them.
 
-The group (``start_new_session``) holds torchrun's agent; torchrun starts each rank in a session of
+On one machine the agent is ``model.train.agent`` (torchrun with a rendezvous on loopback: nothing
+of the run listens on the network); across machines it is ``torchrun`` with a c10d rendezvous.
+The group (``start_new_session``) holds the agent; it starts each rank in a session of
 its own, so "the group" here is the agent's group and every process descending from it, and
 stopping it signals each of their groups. The ranks run with ``--watch-parent``: SIGKILL the agent
 and the kernel SIGKILLs them too. The engine's ``--watch-pid`` covers the worker: a SIGKILLed
@@ -24,6 +26,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -35,21 +38,30 @@ STOP_GRACE_S = 10.0
 TRAINERS_FILE = "trainers.json"
 
 
-def torchrun_command(run_dir: Path, launch: dict[str, Any], *, watch_pid: int) -> list[str]:
-    """The command line of a run: ``--standalone`` on one node, a c10d rendezvous across several.
+def torchrun_command(run_dir: Path, launch: dict[str, Any], *, watch_pid: int,
+                     backbones: Mapping[str, str] | None = None) -> list[str]:
+    """The command line of a run: ``model.train.agent`` (loopback only) on one node, torchrun's
+    c10d rendezvous across several. ``backbones``: the frozen backbones' directories on this
+    machine by model field (``mono_model_path``, ``vlm_model_path``), passed to the engine.
 
     Only rank 0's output reaches the console (the job log); every rank's goes to ``RUN_DIR/logs``.
     """
     nnodes = int(launch.get("nnodes") or 1)
     if nnodes > 1 or launch.get("rdzv_endpoint"):
-        rendezvous = ["--nnodes", str(nnodes), "--rdzv-backend", "c10d",
-                      "--rdzv-endpoint", str(launch["rdzv_endpoint"]), "--rdzv-id", f"run-{run_dir.name}"]
+        agent = ["torch.distributed.run", "--nnodes", str(nnodes), "--rdzv-backend", "c10d",
+                 "--rdzv-endpoint", str(launch["rdzv_endpoint"]), "--rdzv-id", f"run-{run_dir.name}"]
     else:
-        rendezvous = ["--standalone", "--nnodes", "1"]
-    return [sys.executable, "-m", "torch.distributed.run", *rendezvous,
-            "--nproc-per-node", str(int(launch.get("nproc") or 1)),
+        agent = ["model.train.agent"]
+    return [sys.executable, "-m", *agent, "--nproc-per-node", str(int(launch.get("nproc") or 1)),
             "--log-dir", str(run_dir / "logs"), "--tee", "3", "--local-ranks-filter", "0",
-            "-m", "model.train", str(run_dir), "--watch-pid", str(watch_pid), "--watch-parent"]
+            "-m", "model.train", str(run_dir), *engine_options(backbones or {}),
+            "--watch-pid", str(watch_pid), "--watch-parent"]
+
+
+def engine_options(backbones: Mapping[str, str]) -> list[str]:
+    """``model.train``'s options naming the frozen backbones' directories (``--mono-model-path DIR`` …)."""
+    return [option for field, directory in sorted(backbones.items())
+            for option in (f"--{field.replace('_', '-')}", directory)]
 
 
 def device_env(devices: str) -> dict[str, str]:

@@ -50,13 +50,18 @@ def test_output_lines_arrive_and_exit_status_is_kept() -> None:
 def test_torchrun_command_single_node_and_multi_node(tmp_path: Path) -> None:
     run_dir = tmp_path / "7"
     single = torchrun_command(run_dir, {"nproc": 2}, watch_pid=123)
-    assert single[:3] == [sys.executable, "-m", "torch.distributed.run"]
-    assert "--standalone" in single and single[single.index("--nproc-per-node") + 1] == "2"
+    # One machine: torchrun's agent with its rendezvous on loopback (tests/test_trainer_sockets.py).
+    assert single[:3] == [sys.executable, "-m", "model.train.agent"]
+    assert "--standalone" not in single and single[single.index("--nproc-per-node") + 1] == "2"
     # The ranks watch the worker and their parent (torchrun starts each in a session of its own).
     assert single[-6:] == ["-m", "model.train", str(run_dir), "--watch-pid", "123", "--watch-parent"]
     assert single[single.index("--local-ranks-filter") + 1] == "0"  # rank 0's output is the job log
+    paper = torchrun_command(run_dir, {}, watch_pid=1, backbones={"vlm_model_path": "/w/qwen",
+                                                                   "mono_model_path": "/w/da"})
+    assert paper[paper.index(str(run_dir)) + 1:] == ["--mono-model-path", "/w/da", "--vlm-model-path", "/w/qwen",
+                                                     "--watch-pid", "1", "--watch-parent"]
     multi = torchrun_command(run_dir, {"nproc": 4, "nnodes": 2, "rdzv_endpoint": "node0:29400"}, watch_pid=1)
-    assert "--standalone" not in multi
+    assert multi[:3] == [sys.executable, "-m", "torch.distributed.run"] and "--standalone" not in multi
     assert multi[multi.index("--rdzv-endpoint") + 1] == "node0:29400"
     assert multi[multi.index("--rdzv-id") + 1] == "run-7"
     assert multi[multi.index("--nnodes") + 1] == "2"

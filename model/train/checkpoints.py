@@ -7,6 +7,7 @@ A checkpoint is ``model.checkpoint.save_checkpoint``'s file; the engine's state 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import random
@@ -19,6 +20,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from model.checkpoint import load_checkpoint, weights_finite
+from model.presets import Config, ModelConfig
 from model.train import BEST_NAME, CHECKPOINT_DIR, KEEP_FILE
 
 _STEP_NAME = re.compile(r"^step_(\d{7,})\.pt$")
@@ -39,6 +42,27 @@ def step_checkpoints(run_dir: Path) -> list[tuple[int, Path]]:
         return []
     found = [(int(m.group(1)), p) for p in folder.iterdir() if (m := _STEP_NAME.match(p.name))]
     return sorted(found)
+
+
+def model_differences(stored: ModelConfig, wanted: ModelConfig) -> list[str]:
+    """The model config fields in which a checkpoint's ``stored`` config differs from the run's."""
+    return [f.name for f in dataclasses.fields(stored) if getattr(stored, f.name) != getattr(wanted, f.name)]
+
+
+def check_init(path: Path, config: Config, label: str) -> None:
+    """Refuse (ValueError, the file named by ``label``) an init checkpoint a run of ``config`` cannot
+    start from: one that does not load weights-only, whose weights are not finite (what promote
+    refuses), or whose model config differs from the run's."""
+    payload = load_checkpoint(path, label=label)
+    if not weights_finite(payload):
+        raise ValueError(f"{label} has non-finite weights (its run diverged); start from another checkpoint")
+    try:
+        stored = Config.from_dict(payload["config"])
+    except (KeyError, ValueError) as exc:
+        raise ValueError(f"{label} holds no model config this engine reads ({exc})") from None
+    differ = model_differences(stored.model, config.model)
+    if differ:
+        raise ValueError(f"{label}: its model config differs from the run's in {', '.join(differ)}")
 
 
 def kept_by_product(run_dir: Path) -> set[Path] | None:

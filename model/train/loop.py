@@ -39,6 +39,7 @@ from model.train import CANCEL_FILE
 from model.train.checkpoints import (
     best_path,
     copy_atomic,
+    model_differences,
     prune,
     restore_rng,
     rng_state,
@@ -127,8 +128,7 @@ class Trainer:
         if source is None:
             return FusionNetwork(self.config.model).to(self.device), None
         network, stored, payload = load_network(source, device=str(self.device))
-        differ = [f.name for f in dataclasses.fields(stored.model)
-                  if getattr(stored.model, f.name) != getattr(self.config.model, f.name)]
+        differ = model_differences(stored.model, self.config.model)
         if differ:
             raise ValueError(f"{source}: its model config differs from run.json's in {', '.join(differ)}")
         return network, payload if resume is not None else None

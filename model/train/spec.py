@@ -4,13 +4,19 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from model.presets import Config, TrainConfig
 
 RUN_FILE = "run.json"
+# The frozen backbones a model loads from a local directory: its config's field, what the weights
+# are, and the product's setting that names the directory on each machine. A run's config names
+# none (the database's copy is shown in answers): the train worker passes its own to the engine.
+BACKBONES = (("mono_model_path", "Depth Anything V2", "depth_model_path"),
+             ("vlm_model_path", "Qwen2-VL", "vlm_model_path"))
 SPLITS = ("train", "val", "test")
 MAX_STEPS = 2**31 - 1  # steps reach the product's 32-bit integer columns
 MAX_SEED = 2**63 - 1  # torch generators take seeds below 2**64; the per-sample seeds add words to it
@@ -75,6 +81,12 @@ def read_run(run_dir: Path) -> RunSpec:
         init_checkpoint=Path(raw["init_checkpoint"]) if raw.get("init_checkpoint") else None,
         device=raw.get("device"), workers=workers,
     )
+
+
+def with_backbones(config: Config, directories: Mapping[str, str]) -> Config:
+    """``config`` whose frozen backbones load from ``directories`` (model field → directory:
+    ``mono_model_path``, ``vlm_model_path``), in place of the directories it names."""
+    return replace(config, model=replace(config.model, **directories))
 
 
 def check_train(cfg: TrainConfig, where: str) -> None:

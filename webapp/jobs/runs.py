@@ -20,8 +20,9 @@ from dataset.services.errors import Conflict, InvalidInput, NotFound
 from model import launcher, registry
 from model.fit import check_fit, train_device
 from model.jobs import resolve_config
-from model.launch import FieldError, RunLaunch
+from model.launch import FieldError, RunLaunch, backbone_dirs
 from model.presets import Config
+from model.train.spec import with_backbones
 
 if TYPE_CHECKING:
     from webapp.runtime import Runtime
@@ -72,8 +73,12 @@ def launch(rt: Runtime, session: Session, *, preset: str, overrides: dict[str, A
     ``run.json`` written) and queue its job. ``init``, a run's checkpoint to start from, is pinned
     only once the launch has passed every check."""
     config = resolve_config(preset, {**overrides, "train.seed": launch.seed})
+    # The run's config names no backbone directory (answers show it); this machine's settings name
+    # them for the memory estimate, and each train worker's own for the engine.
+    resolved = Config.from_dict(config)
+    resolved = with_backbones(resolved, backbone_dirs(resolved, rt.settings))
     version = training.pin_selection(session, rt.media, selection)
-    check_fit(Config.from_dict(config), nproc=launch.nproc, device=train_device(launch.devices, rt.settings),
+    check_fit(resolved, nproc=launch.nproc, device=train_device(launch.devices, rt.settings),
               memory_gb=rt.settings.train_memory_gb, smallest_image=training.smallest_image(session, version, selection))
     if init is not None:
         try:
@@ -107,6 +112,9 @@ def resume(rt: Runtime, run_id: int, user: User | None) -> None:
     """Queue the run's job again; the engine resumes from the run's newest checkpoint."""
     if launcher.recorded_members(training.run_dir(rt.settings.runs_dir, run_id)):
         raise Conflict(f"run {run_id}'s trainers are still stopping; resume it once they are gone")
+    from webapp.jobs.queue import check_reachable, queue_for  # rt.queue has loaded it: no cycle at import
+
+    check_reachable(rt.queue.hueys[queue_for("train")])  # a 503 before the job is marked queued
     with transaction(rt.sessions) as s:
         job_id = training.prepare_resume(s, training.get_run(s, run_id), _attached(s, user))
         job_rows.mark_for_retry(s, job_id)
