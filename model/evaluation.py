@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 from sqlalchemy.orm import Session
 
+from dataset.contained import storage_root
 from dataset.db import transaction
 from dataset.formats import read_pfm
 from dataset.readers import StereoSample, open_reader, resize_sample
@@ -119,7 +120,7 @@ def _outside(path: Path, settings: Any) -> dict[str, Any]:
     path = Path(path).resolve()
     ref: dict[str, Any] = {"path": str(path)}
     run_dir = path.parent.parent
-    if path.parent.name == "checkpoints" and run_dir.parent == Path(settings.runs_dir).resolve() \
+    if path.parent.name == "checkpoints" and run_dir.parent == storage_root(settings.runs_dir) \
             and run_dir.name.isdigit():
         ref["run"] = int(run_dir.name)
     return ref
@@ -172,10 +173,10 @@ def open_samples(params: dict[str, Any], settings: Any) -> Any:
     return VersionReader(run["dataset"], settings.media_root, sample_ids=test_ids)
 
 
-def report_dir(params: dict[str, Any], settings: Any, job_id: int) -> Path:
-    """Where an evaluate job writes its report: the command line's ``--out``, else the workspace's
-    ``evaluations/<job id>``."""
-    return Path(params["out"]) if params["out"] else Path(settings.home) / "evaluations" / str(job_id)
+def report_dir(params: dict[str, Any], settings: Any, job_id: int, *, writing: bool = False) -> Path:
+    """Where an evaluate job writes its report: the command line's ``--out`` (its user's choice), else
+    the workspace's ``evaluations/<job id>``, which refuses links (``writing``: anywhere inside it too)."""
+    return Path(params["out"]) if params["out"] else evaluations.report_folder(settings.home, job_id, writing=writing)
 
 
 def evaluate_job(ctx: JobContext) -> dict[str, Any]:
@@ -183,7 +184,7 @@ def evaluate_job(ctx: JobContext) -> dict[str, Any]:
     the headline table (per method and region: EPE, bad-2) and where the report is. The job's
     ``evaluations`` row gets that summary and, for database samples, per-sample results."""
     p, settings = ctx.params, ctx.settings
-    out = report_dir(p, settings, ctx.job_id)
+    out = report_dir(p, settings, ctx.job_id, writing=True)
     with transaction(ctx.sessions) as s:
         evaluation_id = evaluations.evaluation_for_job(s, ctx.job_id, p).id
     reader = open_samples(p, settings)

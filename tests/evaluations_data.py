@@ -50,7 +50,7 @@ def evaluated_database(rt: Runtime, tmp: Path, videos: int = 3) -> tuple[int, li
         write_pfm(path, np.full((H, W), DISPARITY + k * STEP_PX, np.float32))
     request = validate(EvaluationLaunch, {"methods": ["predictions", "sgbm"], "run": run_id})
     with transaction(rt.sessions) as s:
-        params = evaluation_params(request, rt.settings, s, EvalShellOptions(predictions=predictions, out=tmp / "report"))
+        params = evaluation_params(request, rt.settings, s, EvalShellOptions(predictions=predictions))
         job_id = job_service.create_job(s, "evaluate", params, None).id
     assert job_service.execute_job(job_id, {"evaluate": HANDLERS["evaluate"]}, rt).value == "succeeded"
     return job_id, ids

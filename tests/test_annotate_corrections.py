@@ -61,7 +61,8 @@ def scene(request: pytest.FixtureRequest, runtime: Runtime, tmp_path: Path) -> P
 def segment(client, tokens, frame_id: int, **body: object) -> np.ndarray:  # type: ignore[no-untyped-def]
     response = client.post(f"/api/v1/frames/{frame_id}/segment", headers=auth(tokens), json=body)
     assert response.status_code == 200, response.get_data(as_text=True)[:500]
-    return rle_to_mask(response.json["mask"])
+    detail = client.get(f"/api/v1/frames/{frame_id}", headers=auth(tokens)).json
+    return rle_to_mask(response.json["mask"], (detail["height"], detail["width"]))
 
 
 def near_edge_inside(mask: np.ndarray) -> list[float]:
@@ -113,7 +114,7 @@ def test_correcting_clicks(client, tokens, scene, settings, runtime) -> None:  #
     [region] = draft["regions"]
     assert region["clicks"] == [{"propagated_from": frame_id}]
     there = truth(scene, draft["index"], "illusion_00")
-    draft_mask = rle_to_mask(region["mask"])
+    draft_mask = rle_to_mask(region["mask"], (draft["height"], draft["width"]))
     if not draft_mask.any():
         draft_mask = there
     fixed = segment(client, tokens, target, points=[near_edge_inside(draft_mask)], labels=[0],

@@ -65,6 +65,9 @@ def test_a_malformed_number_is_refused_under_its_field_and_the_estimate_uses_the
     estimate = page.locator("#launch-estimate")
     page.wait_for_function("() => !document.getElementById('launch-estimate').textContent.includes('…')")
     assert "unknown" in estimate.inner_text()
+    # empty fields name what the launch will take: the preset's values
+    assert form.locator("[name=steps]").get_attribute("placeholder") == "2000 (lite's)"
+    assert form.locator("[name=batch]").get_attribute("placeholder") == "2 (lite's)"
     for field, typed in (("steps", "1e"), ("batch", "--2")):
         form.locator(f"[name={field}]").press_sequentially(typed)
         form.locator(f"[name={field}]").press("Enter")

@@ -68,9 +68,9 @@ def test_report_files_stay_inside_the_report_folder(client, runtime, tokens, eva
         assert client.get(f"/api/v1/evaluations/1/files/{escape}", headers=headers,
                           follow_redirects=True).status_code == 404, escape
     with transaction(runtime.sessions) as s:
-        for escape in ("/etc/passwd", "../report/../../ws/illusion-studio.db"):
+        for escape in ("/etc/passwd", "../1/../../illusion-studio.db"):
             with pytest.raises(NotFound):
-                evaluations.report_file(evaluations.get_evaluation(s, 1), escape)
+                evaluations.report_file(evaluations.get_evaluation(s, 1), escape, runtime.settings.home)
 
 
 def test_samples_by_error_and_one_evaluated_sample(client, tokens, evaluated) -> None:  # type: ignore[no-untyped-def]

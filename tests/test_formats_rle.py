@@ -22,7 +22,7 @@ masks = st.tuples(st.integers(1, 40), st.integers(1, 40)).flatmap(
 def test_round_trip_and_pycocotools_agree(mask: np.ndarray) -> None:
     rle = mask_to_rle(mask)
     assert rle["size"] == list(mask.shape) and isinstance(rle["counts"], str)
-    decoded = rle_to_mask(rle)
+    decoded = rle_to_mask(rle, mask.shape)
     assert np.array_equal(decoded, mask) and decoded.flags.c_contiguous  # OpenCV 5 takes C order only
     coded = {"size": rle["size"], "counts": rle["counts"].encode()}
     assert np.array_equal(coco_mask.decode(coded).astype(bool), mask)
@@ -33,18 +33,18 @@ def test_large_structured_mask() -> None:
     mask = np.zeros((1080, 1920), bool)
     mask[100:900, 300:1700] = True
     mask[400:500, 800:900] = False
-    assert np.array_equal(rle_to_mask(mask_to_rle(mask)), mask)
+    assert np.array_equal(rle_to_mask(mask_to_rle(mask), (1080, 1920)), mask)
 
 
 def test_uncompressed_counts_are_accepted() -> None:
     # column-major runs: 2 off, 3 on, 1 off on a 2x3 mask
-    mask = rle_to_mask({"size": [2, 3], "counts": [2, 3, 1]})
+    mask = rle_to_mask({"size": [2, 3], "counts": [2, 3, 1]}, (2, 3))
     assert np.array_equal(mask, np.array([[False, True, True], [False, True, False]]))
 
 
 def test_empty_and_degenerate_sizes() -> None:
-    assert np.array_equal(rle_to_mask(mask_to_rle(np.zeros((3, 4), bool))), np.zeros((3, 4), bool))
-    assert rle_to_mask({"size": [0, 5], "counts": ""}).shape == (0, 5)
+    assert np.array_equal(rle_to_mask(mask_to_rle(np.zeros((3, 4), bool)), (3, 4)), np.zeros((3, 4), bool))
+    assert rle_to_mask({"size": [0, 5], "counts": ""}, (0, 5)).shape == (0, 5)
 
 
 @pytest.mark.parametrize("bad", [
@@ -67,7 +67,7 @@ def test_empty_and_degenerate_sizes() -> None:
 ])
 def test_malformed_rle_raises_format_error(bad) -> None:
     with pytest.raises(FormatError):
-        rle_to_mask(bad)
+        rle_to_mask(bad, (3, 3))
 
 
 def test_mask_must_be_two_dimensional() -> None:

@@ -13,8 +13,10 @@ from sqlalchemy import func, select
 
 from dataset.db import transaction
 from dataset.models import Frame, Job, JobState
+from dataset.redact import redactor_for
 from dataset.services import jobs as job_service
 from dataset.services.ingest import ingest_params
+from dataset.settings import Settings
 from dataset.synthetic import write_synthetic_dataset
 from tests.workers import extra_settings, queue_settings, rt, start_worker, wait_for  # noqa: F401  (fixtures)
 from webapp.cli import main
@@ -103,15 +105,17 @@ def test_a_failing_job_records_a_readable_reason(runtime: Runtime, tmp_path: Pat
     with runtime.sessions() as s:
         job = s.get(Job, job_id)
         # for people: what went wrong and which file, not the server's folders nor the class name
-        assert job.error in ("nowhere: no such file", "nowhere: no such file or directory"), job.error
+        assert job.error in ("…/nowhere: no such file", "…/nowhere: no such file or directory"), job.error
         assert not job.error.startswith("IngestError") and "IngestError" in job.log and "Traceback" in job.log
 
 
-def test_user_error_keeps_messages_short_and_names_bugs() -> None:
-    assert job_service.user_error(ValueError("/srv/ws/media/81/d7/ab12.mp4: cannot decode\nmore")) == "ab12.mp4: cannot decode"
-    assert job_service.user_error(KeyError("frame_ids")) == "KeyError: 'frame_ids'"
-    assert job_service.user_error(RuntimeError()) == "RuntimeError"
-    assert len(job_service.user_error(ValueError("x" * 1000))) == 300
+def test_user_error_keeps_messages_short_and_names_bugs(settings: Settings) -> None:
+    redact = redactor_for(settings)
+    assert job_service.user_error(ValueError(f"{settings.media_root}/81/d7/ab12.mp4: cannot decode\nmore"),
+                                  redact) == "media/81/d7/ab12.mp4: cannot decode"
+    assert job_service.user_error(KeyError("frame_ids"), redact) == "KeyError: 'frame_ids'"
+    assert job_service.user_error(RuntimeError(), redact) == "RuntimeError"
+    assert len(job_service.user_error(ValueError("x" * 1000), redact)) == 300
 
 
 def test_redelivered_job_runs_once(runtime: Runtime, tmp_path: Path) -> None:

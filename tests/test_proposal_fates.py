@@ -12,7 +12,7 @@ from sqlalchemy import select
 
 from dataset.db import transaction
 from dataset.formats import mask_to_rle, rle_to_mask
-from dataset.models import Frame, FrameState, Job, ProposalScan
+from dataset.models import Frame, FrameState, Job, Proposal, ProposalScan
 from dataset.services import jobs as job_service
 from dataset.services.ingest import ingest_params
 from dataset.synthetic import write_synthetic_dataset
@@ -82,7 +82,7 @@ def test_approval_queues_proposals_and_the_page_gets_them(client, tokens, scene,
     best = detail["proposals"][0]
     assert best["source"] == "plane-break" and best["fate"] == "pending" and best["illusion_type"] == "picture"
     picture = truth(scene, 0, "illusion_00")
-    proposed = rle_to_mask(best["illusion"])
+    proposed = rle_to_mask(best["illusion"], (H, W))
     assert (proposed & picture).sum() / (proposed | picture).sum() >= 0.8
     # Idempotent: a second job for the same frames proposes nothing new.
     with transaction(runtime.sessions) as s:
@@ -114,15 +114,17 @@ def test_fates_on_submit_and_the_figures_per_proposer(client, tokens, scene, run
 
     # Frame 0: accepted as proposed (both masks untouched).
     first = proposals[ids[0]][0]
-    _submit(client, tokens, ids[0], _pair(1, rle_to_mask(first["illusion"]), rle_to_mask(first["support"]), first["id"]))
+    _submit(client, tokens, ids[0],
+            _pair(1, rle_to_mask(first["illusion"], (H, W)), rle_to_mask(first["support"], (H, W)), first["id"]))
     # Frame 1: accepted, then corrected: a strip of the illusion taken away.
     second = proposals[ids[1]][0]
-    edited = rle_to_mask(second["illusion"]).copy()
+    edited = rle_to_mask(second["illusion"], (H, W)).copy()
     rows = np.flatnonzero(edited.any(axis=1))
     edited[rows[: len(rows) // 4]] = False
-    _submit(client, tokens, ids[1], _pair(1, edited, rle_to_mask(second["support"]), second["id"]))
+    _submit(client, tokens, ids[1], _pair(1, edited, rle_to_mask(second["support"], (H, W)), second["id"]))
     # Frame 2: its proposal rejected, the picture drawn by hand; a made-up second illusion no proposal found.
     third = proposals[ids[2]][0]
+    assert client.post(f"/api/v1/frames/{ids[2]}/lease", headers=auth(tokens)).status_code == 200
     rejected = client.post(f"/api/v1/frames/{ids[2]}/proposals/{third['id']}/reject", headers=auth(tokens))
     assert rejected.json == {"id": third["id"], "fate": "rejected"}
     corner = np.zeros((H, W), bool)
@@ -159,18 +161,22 @@ def test_rejecting_checks_the_frame_and_its_holder(client, tokens, scene, runtim
     mine = client.get(f"/api/v1/frames/{ids[0]}", headers=auth(tokens)).json["proposals"][0]
     wrong = client.post(f"/api/v1/frames/{ids[1]}/proposals/{mine['id']}/reject", headers=auth(tokens))
     assert wrong.status_code == 404 and "has no proposal" in wrong.json["error"]
+    # Without the frame's lease: the annotator at work on it decides its proposals.
+    unheld = client.post(f"/api/v1/frames/{ids[0]}/proposals/{mine['id']}/reject", headers=auth(tokens))
+    assert unheld.status_code == 409 and f"take frame {ids[0]} first" in unheld.json["error"]
     held = client.post(f"/api/v1/frames/{ids[0]}/lease", headers=auth(tokens, "curator"))
     assert held.status_code == 200
     refused = client.post(f"/api/v1/frames/{ids[0]}/proposals/{mine['id']}/reject", headers=auth(tokens))
     assert refused.status_code == 409 and "someone else" in refused.json["error"]
     with runtime.sessions() as s:
         assert s.get(Frame, ids[0]).state == FrameState.approved
+        assert {p.fate.value for p in s.scalars(select(Proposal).where(Proposal.frame_id == ids[0]))} == {"pending"}
 
 
 def test_only_frames_in_the_annotation_queue_get_proposals(client, tokens, scene, runtime) -> None:  # type: ignore[no-untyped-def]
     ids = [f.id for f in _frames(runtime)]
-    # Opening a frame that is not approved yet queues nothing.
-    assert client.post(f"/api/v1/frames/{ids[0]}/lease", headers=auth(tokens)).status_code == 200
+    # A frame that is not approved yet cannot be taken, and opening it queues nothing.
+    assert client.post(f"/api/v1/frames/{ids[0]}/lease", headers=auth(tokens)).status_code == 409
     with runtime.sessions() as s:
         assert s.scalar(select(Job.id).where(Job.kind == "propose")) is None
     _approve_all(client, tokens, runtime)
@@ -210,11 +216,16 @@ def test_odd_proposal_ids_are_refused_or_ignored(client, tokens, scene, runtime)
     for odd in ("99999999999999999999", "-1", "1.5", "NaN", "%2Ftmp%2Fx.pt"):
         answer = client.post(f"/api/v1/frames/{ids[0]}/proposals/{odd}/reject", headers=auth(tokens))
         assert answer.status_code == 404, odd
-    # In a submitted region's clicks a link that is no integer id of this frame is no link: nothing breaks.
-    links = [{"proposal_id": v} for v in ("1", 1.0, True, 2**70, None, "/etc/passwd")]
+    # In a submitted region's clicks a link that is no integer id is refused; an id of no proposal of this
+    # frame is no link: nothing breaks.
     regions = _pair(1, truth(scene, 0, "illusion_00"), truth(scene, 0, "support_00"))
+    for odd in ("1", 1.0, True, 2**70, None, "/etc/passwd"):
+        regions[0]["clicks"] = [{"proposal_id": odd}]
+        saved = client.post(f"/api/v1/frames/{ids[0]}/annotation", headers=auth(tokens),
+                            json={"version": 0, "regions": regions, "illusion_type": "picture", "submit": True})
+        assert saved.status_code == 400 and "clicks entry 0" in saved.json["error"], odd
     for region in regions:
-        region["clicks"] = links
+        region["clicks"] = [{"proposal_id": 2**31 - 1}]
     _submit(client, tokens, ids[0], regions)
     fates = {p["fate"] for p in client.get(f"/api/v1/frames/{ids[0]}", headers=auth(tokens)).json["proposals"]}
     assert fates == {"rejected"}

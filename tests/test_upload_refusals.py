@@ -55,3 +55,20 @@ def test_a_failed_uploads_file_goes_at_the_next_gc(settings, runtime, client, to
     done = json.loads(CliRunner().invoke(cli, ["--data-dir", str(settings.home), "media", "gc"]).output)
     assert done["removed"] == 1
     assert not os.path.exists(paths[failed]) and os.path.exists(paths[interrupted])
+
+
+def test_a_file_name_longer_than_any_file_system_takes_is_refused(runtime, client, tokens) -> None:  # type: ignore[no-untyped-def]
+    auth = {"Authorization": f"Bearer {tokens['curator']}"}
+    response = client.post("/api/v1/videos", headers=auth, content_type="multipart/form-data",
+                           data={"file": (io.BytesIO(b"RIFF" + b"\0" * 60), "v" * 300 + ".mp4")})
+    assert response.status_code == 400 and "at most 255" in response.json["error"]
+    assert not list(runtime.media.root.rglob("*.mp4"))
+
+
+def test_a_login_password_is_bounded_before_it_is_hashed(client) -> None:  # type: ignore[no-untyped-def]
+    from tests.conftest import login
+
+    response = login(client, "admin", "x" * 5000)
+    page = response.get_data(as_text=True)
+    assert response.status_code == 200 and "longer than 1024 characters" in page  # the form's own error
+    assert "Wrong user name or password" not in page  # never hashed, nor counted as a failed login

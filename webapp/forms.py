@@ -7,12 +7,12 @@ from wtforms import PasswordField, SelectField, StringField
 from wtforms.validators import DataRequired, Length
 
 from dataset.models import Role
-from dataset.services.users import MIN_PASSWORD
+from dataset.services.users import MAX_PASSWORD, MIN_PASSWORD
 
 
 class LoginForm(FlaskForm):
     name = StringField("User name", validators=[DataRequired(), Length(max=64)])
-    password = PasswordField("Password", validators=[DataRequired()])
+    password = PasswordField("Password", validators=[DataRequired(), Length(max=MAX_PASSWORD)])
 
 
 class LogoutForm(FlaskForm):

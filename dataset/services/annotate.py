@@ -8,8 +8,10 @@ cannot be saved or deleted.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from datetime import datetime
+from typing import Annotated, Any
 
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 from sqlalchemy import select, update
 from sqlalchemy.orm import Session
 
@@ -18,12 +20,70 @@ from dataset.models import Annotation, Frame, FrameState, IllusionType, Region, 
 from dataset.services import audit, proposals
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.frames import get_frame, update_frame
-from dataset.services.leases import ensure_annotation_row, held_by_other, release_lease
+from dataset.services.leases import ensure_annotation_row, held_by_other, release_lease, renew_lease
 from dataset.services.sample_review import returned_note
-from dataset.services.validate import db_int
+from dataset.services.validate import DB_INT_MAX, db_int, shown
 
 ANNOTATABLE = (FrameState.approved,)
 DELETE_REASONS = ("redundant", "imperceptible")
+MAX_REGIONS = 64
+MAX_CLICKS = 1000  # entries per region; the page sends its clicks, one box and a link or two
+
+
+class _Entry(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False, frozen=True)
+
+    def inside(self, width: int, height: int) -> bool:
+        """Whether the entry's pixels lie on a width x height frame (an entry without any does)."""
+        return True
+
+
+_Coordinate = Annotated[float, Field(ge=0)]
+_Id = Annotated[int, Field(ge=0, le=DB_INT_MAX)]
+
+
+class _Point(_Entry):
+    """A click: the pixel it hit and whether it is inside (1) or outside (0) the region."""
+
+    x: _Coordinate
+    y: _Coordinate
+    label: int = Field(ge=0, le=1)
+
+    def inside(self, width: int, height: int) -> bool:
+        return self.x < width and self.y < height
+
+
+class _Box(_Entry):
+    """A dragged box, [x0, y0, x1, y1] in pixels (its edges may lie on the frame's far edges)."""
+
+    box: list[_Coordinate] = Field(min_length=4, max_length=4)
+
+    def inside(self, width: int, height: int) -> bool:
+        return max(self.box[::2]) <= width and max(self.box[1::2]) <= height
+
+
+class _Proposal(_Entry):
+    """The proposal the region was accepted from (:mod:`dataset.services.proposals`)."""
+
+    proposal_id: _Id
+
+
+class _Propagated(_Entry):
+    """The frame the region was propagated from (the ``propagate`` job writes it)."""
+
+    propagated_from: _Id
+
+
+class _Source(_Entry):
+    """Where a mask came from when no one clicked it (the demo's ground truth)."""
+
+    source: str = Field(alias="from", max_length=64)
+
+
+# What a region's ``clicks`` may hold: the entries the Annotate page and the jobs write, nothing else
+# (they are stored and served to the next annotator as they came).
+_CLICKS = TypeAdapter(list[_Point | _Box | _Proposal | _Propagated | _Source])
+_CLICK_FORMS = "{x, y, label: 0|1}, {box: [x0, y0, x1, y1]}, {proposal_id}, {propagated_from} or {from: text}"
 
 
 def frame_detail(session: Session, frame_id: int, user: User | Any) -> dict[str, Any]:
@@ -112,12 +172,12 @@ def _parse_type(value: str) -> IllusionType:
     try:
         return IllusionType(value)
     except ValueError:
-        raise InvalidInput(f"unknown illusion type {value!r}; choose one of {', '.join(IllusionType)}") from None
+        raise InvalidInput(f"unknown illusion type {shown(value)}; choose one of {', '.join(IllusionType)}") from None
 
 
 def _parse_regions(regions: Sequence[Any], height: int, width: int, *, require_illusion: bool) -> list[Region]:
-    if not isinstance(regions, list) or len(regions) > 64:
-        raise InvalidInput("regions must be a list of at most 64 masks")
+    if not isinstance(regions, list) or len(regions) > MAX_REGIONS:
+        raise InvalidInput(f"regions must be a list of at most {MAX_REGIONS} masks")
     out, seen = [], set()
     for n, r in enumerate(regions):
         if not isinstance(r, dict):
@@ -131,14 +191,10 @@ def _parse_regions(regions: Sequence[Any], height: int, width: int, *, require_i
             raise InvalidInput(f"pair {pair} has two {kind.value} regions")
         seen.add((pair, kind))
         try:
-            mask = rle_to_mask(r.get("mask"))
+            mask = rle_to_mask(r.get("mask"), (height, width))
         except FormatError as exc:
             raise InvalidInput(f"region {n}: {exc}") from None
-        if mask.shape != (height, width):
-            raise InvalidInput(f"region {n}: mask is {mask.shape[1]}x{mask.shape[0]}, the frame {width}x{height}")
-        clicks = r.get("clicks") or []
-        if not isinstance(clicks, list) or len(clicks) > 1000:
-            raise InvalidInput(f"region {n}: clicks must be a list")
+        clicks = _clicks(r.get("clicks") or [], height, width, f"region {n}")
         out.append(Region(pair=pair, kind=kind, mask_rle=mask_to_rle(mask), clicks=clicks))
     types: dict[int, IllusionType] = {}
     for n, (r, region) in enumerate(zip(regions, out, strict=True)):
@@ -156,6 +212,47 @@ def _parse_regions(regions: Sequence[Any], height: int, width: int, *, require_i
             raise InvalidInput("every pair needs an illusion region before submitting"
                                + (f" (pair {missing[0]} has none)" if missing else ""))
     return out
+
+
+def _clicks(clicks: Any, height: int, width: int, where: str) -> list[Any]:
+    """A region's click entries, checked to be those the page sends (:data:`_CLICKS`) on the frame;
+    stored as they came (a click at pixel 3 stays 3, not 3.0)."""
+    if not isinstance(clicks, list) or len(clicks) > MAX_CLICKS:
+        raise InvalidInput(f"{where}: clicks must be a list of at most {MAX_CLICKS} entries")
+    try:
+        entries = _CLICKS.validate_python(clicks)
+    except ValidationError as exc:
+        raise InvalidInput(f"{where}: clicks entry {exc.errors()[0]['loc'][0]} must be one of {_CLICK_FORMS}") from None
+    for i, entry in enumerate(entries):
+        if not entry.inside(width, height):
+            raise InvalidInput(f"{where}: clicks entry {i} is outside the {width}x{height} frame")
+    return clicks
+
+
+def take_lease(session: Session, frame_id: int, user: User | Any, lease_s: int) -> datetime:
+    """Take or renew ``user``'s lease on a frame to annotate; when it ends. 404 for no such frame, 409 for
+    a frame that is not to annotate (not approved) or that someone else holds."""
+    frame = session.get(Frame, frame_id, with_for_update=True)
+    if frame is None:
+        raise NotFound(f"no frame {frame_id}")
+    if frame.state not in ANNOTATABLE:
+        raise Conflict(f"frame {frame_id} is {frame.state.value}; only approved frames can be annotated")
+    return renew_lease(session, frame_id, user, lease_s)
+
+
+def give_back(session: Session, frame_id: int, user: User | Any) -> bool:
+    """Release ``user``'s lease on the frame; False when they held none (nothing happened). 404 for no
+    such frame, 409 when someone else holds it (only its holder or its running out frees it)."""
+    get_frame(session, frame_id)
+    ann = session.scalar(select(Annotation).where(Annotation.frame_id == frame_id).with_for_update())
+    if ann is None:
+        return False
+    if held_by_other(ann, user.id):
+        raise Conflict(f"frame {frame_id} is held by another annotator; only they can release it")
+    if ann.lease_user_id != user.id:
+        return False
+    release_lease(session, frame_id, user)
+    return True
 
 
 def delete_frame(session: Session, frame_id: int, user: User | Any, reason: str) -> Frame:

@@ -27,8 +27,12 @@ def resolve_folder(roots: Mapping[str, Path], root: str, path: str = "") -> Path
     relative = PurePosixPath(path)
     if "\0" in path or "\\" in path or relative.is_absolute() or ".." in relative.parts:
         raise refused
-    base = Path(roots[root]).resolve()
-    folder = (base / relative).resolve()
-    if not folder.is_relative_to(base) or not folder.is_dir():
+    try:
+        base = Path(roots[root]).resolve()
+        folder = (base / relative).resolve()
+        inside = folder.is_relative_to(base) and folder.is_dir()
+    except (OSError, RuntimeError):  # a part too long for the file system, a link loop (RuntimeError before 3.13)
+        inside = False
+    if not inside:
         raise refused
     return folder

@@ -1,7 +1,9 @@
 """Evaluations in the database: one row per evaluate job, and per database sample and method its
 figures, so the Samples pages can sort and filter by an evaluation's error.
 
-The job computes the report (``model.evaluation``); this module only stores and reads it.
+The job computes the report (``model.evaluation``) into the workspace's ``evaluations/<job id>``
+(or, from the command line, a folder of its choice); this module stores it and reads it back, from the
+workspace's folder only.
 """
 
 from __future__ import annotations
@@ -13,8 +15,9 @@ from typing import Any
 from sqlalchemy import delete, func, select
 from sqlalchemy.orm import Session
 
-from dataset.contained import contained_file
+from dataset.contained import REPORTS, contained_file, owned_folder
 from dataset.models import Evaluation, EvaluationResult, Frame, Sample, User, Video
+from dataset.redact import shown
 from dataset.services.dataset_roots import folder_label
 from dataset.services.errors import InvalidInput, NotFound
 from dataset.services.sample_review import sample_json
@@ -99,7 +102,7 @@ def _clean(regions: dict[str, dict[str, Any]]) -> dict[str, dict[str, float | No
 def evaluation_json(evaluation: Evaluation) -> dict[str, Any]:
     job = evaluation.job
     return {"id": evaluation.id, "job": evaluation.job_id, "state": job.state.value if job else "unknown",
-            "progress": job.progress if job else None, "error": job.error if job else None,
+            "progress": job.progress if job else None, "error": shown(job.error) if job else None,
             "created_by": evaluation.created_by.name if evaluation.created_by else None,
             "created_at": evaluation.created_at.isoformat() + "Z", "dataset": evaluation.dataset,
             "format": evaluation.params.get("format"), "methods": evaluation.params.get("methods", []),
@@ -123,11 +126,28 @@ def get_evaluation(session: Session, evaluation_id: int) -> Evaluation:
     return row
 
 
-def report_file(evaluation: Evaluation, name: str) -> Path:
-    """A file of the evaluation's report folder by its relative path; never a path outside it."""
-    if not evaluation.report_dir:
+def reports_dir(home: Path) -> Path:
+    """The workspace's ``evaluations/`` (it may be an admin's link to shared storage)."""
+    return Path(home) / REPORTS
+
+
+def report_folder(home: Path, job_id: int, *, writing: bool = False) -> Path:
+    """The workspace's report folder of evaluate job ``job_id``, ``evaluations/<job id>``: LinkedFolder
+    when it is a symbolic link or, ``writing``, when anything inside it is (see ``dataset.contained``)."""
+    return owned_folder(reports_dir(home), str(job_id), whole=writing)
+
+
+def report_file(evaluation: Evaluation, name: str, home: Path) -> Path:
+    """A file of the evaluation's report folder by its relative path; never a path outside it, never a
+    link, and only from the workspace's ``evaluations/`` (a command line's ``--out`` is not served)."""
+    if not evaluation.report_dir or evaluation.job_id is None:
         raise NotFound(f"evaluation {evaluation.id} has no report yet")
-    path = contained_file(Path(evaluation.report_dir), name)
+    folder = report_folder(home, evaluation.job_id)
+    # Stored as written: under the resolved evaluations/ (or, by earlier releases, the workspace's path).
+    if Path(evaluation.report_dir) not in (folder, reports_dir(home) / str(evaluation.job_id)):
+        raise NotFound(f"evaluation {evaluation.id} wrote its report outside the workspace (evaluate --out); "
+                       f"the web serves reports under {REPORTS}/ only")
+    path = contained_file(folder, name)
     if path is None:
         raise NotFound(f"evaluation {evaluation.id} has no report file {name!r}")
     return path

@@ -124,7 +124,7 @@ def generate_job(ctx: JobContext) -> dict[str, Any]:
     left = load_output(media, frame.media_key, "left")
     ctx.progress(0.1, "monocular disparity")
     mono = mono_disparity(settings, media, frame, video, left)
-    pairs = _pairs(regions)
+    pairs = _pairs(regions, (frame.height, frame.width))
     ctx.progress(0.3, f"rectifying {len(pairs)} pair(s)")
     try:
         rect = rectify_disparity(mono.disparity, [p for _, p in pairs], guide=left,
@@ -179,10 +179,10 @@ def generate_job(ctx: JobContext) -> dict[str, Any]:
     return {"sample_id": sample_id, "frame_id": frame.id, "flags": qa["flags"], "cpu_s": qa["cpu_s"]}
 
 
-def _pairs(regions: list[tuple[int, RegionKind, dict[str, Any]]]) -> list[tuple[int, RegionMasks]]:
+def _pairs(regions: list[tuple[int, RegionKind, dict[str, Any]]], shape: tuple[int, int]) -> list[tuple[int, RegionMasks]]:
     masks: dict[int, dict[RegionKind, np.ndarray]] = {}
     for pair, kind, rle in regions:
-        masks.setdefault(pair, {})[kind] = rle_to_mask(rle)
+        masks.setdefault(pair, {})[kind] = rle_to_mask(rle, shape)
     out = []
     for pair in sorted(masks):
         if RegionKind.illusion not in masks[pair]:

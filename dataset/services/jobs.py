@@ -7,7 +7,6 @@ job survives a restarted queue, and a job whose worker died is found and made re
 from __future__ import annotations
 
 import os
-import re
 import socket
 import time
 import traceback
@@ -23,6 +22,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from dataset.db import transaction
 from dataset.media import MediaStore
 from dataset.models import Job, JobState, User, utcnow
+from dataset.redact import redactor_for, shown
 from dataset.services.errors import Conflict, NotFound, ServiceError
 from dataset.settings import Settings
 
@@ -49,32 +49,34 @@ def get_job(session: Session, job_id: int) -> Job:
     return job
 
 
-_ABSOLUTE_PATH = re.compile(r"(?<![\w.])/(?:[^\s/:'\"]+/)+([^\s/:'\"]+)")
 _ERROR_CHARS = 300
 
 
-def user_error(exc: BaseException) -> str:
-    """What a failed job tells its user: the exception's first line, absolute paths cut to their
-    file name (server folders are no business of the page), at most _ERROR_CHARS characters.
+def user_error(exc: BaseException, redact: Callable[[str], str]) -> str:
+    """What a failed job tells its user: the exception's first line, server paths rewritten by
+    ``redact`` (the workspace's :class:`dataset.redact.Redactor`), at most _ERROR_CHARS characters.
     Bad-input errors (ValueError, OSError, ServiceError) are worded for people and shown bare;
     any other exception is a bug and keeps its class name. The full traceback stays in the log."""
     text = (str(exc).strip().splitlines() or [""])[0]
     if not isinstance(exc, (ValueError, OSError, ServiceError)) or not text:
         text = f"{type(exc).__name__}: {text}".rstrip(": ")
-    text = _ABSOLUTE_PATH.sub(r"\1", text)
+    text = redact(text)
     return text if len(text) <= _ERROR_CHARS else text[:_ERROR_CHARS - 1] + "…"
 
 
 def job_json(job: Job, *, with_log: bool = False) -> dict[str, Any]:
+    """What answers say of a job. Its parameters and result (a command line's paths), its error and
+    its log (tracebacks, a trainer's output) come from outside the app's own answers: shown through
+    :func:`dataset.redact.shown`, which keeps server paths out of a request's answer."""
     data: dict[str, Any] = {
         "id": job.id, "kind": job.kind, "state": job.state.value, "progress": job.progress,
-        "params": job.params, "result": job.result, "error": job.error, "attempts": job.attempts,
+        "params": shown(job.params), "result": shown(job.result), "error": shown(job.error), "attempts": job.attempts,
         "worker": job.worker, "created_by": job.created_by.name if job.created_by else None,
         "created_at": _iso(job.created_at), "started_at": _iso(job.started_at),
         "finished_at": _iso(job.finished_at),
     }
     if with_log:
-        data["log"] = job.log
+        data["log"] = shown(job.log)
     return data
 
 
@@ -227,7 +229,7 @@ def execute_job(job_id: int, handlers: dict[str, Handler], env: JobEnv) -> JobSt
         # An ending worded for people (a cancelled or diverged run, bad input) is its own message;
         # a bug keeps its traceback.
         ctx.finish(f"{type(exc).__name__}: {exc}" if isinstance(exc, ServiceError) else traceback.format_exc())
-        return _finish(sessions, job_id, me, state=JobState.failed, error=user_error(exc))
+        return _finish(sessions, job_id, me, state=JobState.failed, error=user_error(exc, redactor_for(env.settings)))
     ctx.finish(None, progress=1.0)
     return _finish(sessions, job_id, me, state=JobState.succeeded, result=result)
 

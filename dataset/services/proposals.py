@@ -30,8 +30,6 @@ from dataset.models import (
     Frame,
     FrameState,
     IllusionType,
-    Job,
-    JobState,
     Proposal,
     ProposalFate,
     ProposalScan,
@@ -46,7 +44,7 @@ from dataset.services.generate import GenerationError, mono_disparity
 from dataset.services.jobs import JobContext
 from dataset.services.leases import held_by_other
 from dataset.services.prefilter import backend_for
-from dataset.services.segmentation import load_rgb, settings_segmenter
+from dataset.services.segmentation import frames_coming, load_rgb, settings_segmenter
 from dataset.settings import Settings
 
 MATCH_IOU = 0.5  # a submitted illusion counts as found by a proposer when one of its proposals overlaps it this much
@@ -75,9 +73,7 @@ def frames_to_scan(session: Session, settings: Settings, frame_ids: Sequence[int
     for frame_id, source in session.execute(select(ProposalScan.frame_id, ProposalScan.source)
                                             .where(ProposalScan.frame_id.in_(approved))):
         scanned.setdefault(frame_id, set()).add(source)
-    # Few propose jobs wait at any time (chunks of approvals and opened frames), so reading their params is cheap.
-    coming = {fid for params in session.scalars(select(Job.params).where(
-        Job.kind == "propose", Job.state.in_((JobState.queued, JobState.running)))) for fid in params.get("frame_ids", [])}
+    coming = frames_coming(session, "propose")
     return [fid for fid in dict.fromkeys(frame_ids)
             if fid in approved and fid not in coming and not wanted <= scanned.get(fid, set())]
 
@@ -182,8 +178,8 @@ def proposal_json(proposal: Proposal) -> dict[str, Any]:
 
 
 def reject_proposal(session: Session, frame_id: int, proposal_id: int, user: User | Any) -> Proposal:
-    """Turn a pending proposal of the frame down (idempotent); 404 for another frame's, 409 while the
-    frame is held by someone else or no longer to annotate."""
+    """Turn a pending proposal of the frame down (idempotent); 404 for another frame's, 409 unless the
+    frame is to annotate and ``user`` holds its lease (the annotator at work on it decides)."""
     proposal = session.get(Proposal, proposal_id, with_for_update=True)
     if proposal is None or proposal.frame_id != frame_id:
         raise NotFound(f"frame {frame_id} has no proposal {proposal_id}")
@@ -193,9 +189,17 @@ def reject_proposal(session: Session, frame_id: int, proposal_id: int, user: Use
     ann = session.scalar(select(Annotation).where(Annotation.frame_id == frame_id))
     if ann is not None and held_by_other(ann, user.id):
         raise Conflict(f"frame {frame_id} is being annotated by someone else")
+    if ann is None or not _holds(ann, user.id):
+        raise Conflict(f"take frame {frame_id} first (POST its lease): proposals are decided by the annotator "
+                       "holding the frame")
     if proposal.fate == ProposalFate.pending:
         _decide(proposal, ProposalFate.rejected, None, user)
     return proposal
+
+
+def _holds(ann: Annotation, user_id: int) -> bool:
+    """``user_id`` holds an unexpired lease on ``ann`` (the counterpart of :func:`held_by_other`)."""
+    return ann.lease_user_id == user_id and ann.lease_expires_at is not None and ann.lease_expires_at > utcnow()
 
 
 def record_fates(session: Session, frame_id: int, regions: Sequence[Region], user: User | Any) -> None:
@@ -208,7 +212,9 @@ def record_fates(session: Session, frame_id: int, regions: Sequence[Region], use
     pairs: dict[int, dict[RegionKind, Region]] = {}
     for region in regions:
         pairs.setdefault(region.pair, {})[region.kind] = region
-    finals = {pair: {kind: rle_to_mask(r.mask_rle) for kind, r in masks.items()} for pair, masks in pairs.items()
+    frame = session.get(Frame, frame_id)
+    shape = (frame.height, frame.width)
+    finals = {pair: {kind: rle_to_mask(r.mask_rle, shape) for kind, r in masks.items()} for pair, masks in pairs.items()
               if RegionKind.illusion in masks}
     linked: dict[int, int] = {}
     for pair, masks in pairs.items():
@@ -218,9 +224,9 @@ def record_fates(session: Session, frame_id: int, regions: Sequence[Region], use
     for proposal in proposals.values():
         if proposal.id in linked:
             final = finals[linked[proposal.id]]
-            proposed = rle_to_mask(proposal.illusion_rle)
+            proposed = rle_to_mask(proposal.illusion_rle, shape)
             iou = mask_iou(proposed, final[RegionKind.illusion])
-            proposed_support = rle_to_mask(proposal.support_rle)
+            proposed_support = rle_to_mask(proposal.support_rle, shape)
             # The page saves no empty region: an absent support is an empty one.
             support = final.get(RegionKind.support, np.zeros_like(proposed_support))
             same = iou == 1.0 and np.array_equal(proposed_support, support)
@@ -229,7 +235,7 @@ def record_fates(session: Session, frame_id: int, regions: Sequence[Region], use
             _decide(proposal, ProposalFate.rejected, None, user)
     masks_by_source: dict[str, list[np.ndarray]] = {}
     for proposal in proposals.values():
-        masks_by_source.setdefault(proposal.source, []).append(rle_to_mask(proposal.illusion_rle))
+        masks_by_source.setdefault(proposal.source, []).append(rle_to_mask(proposal.illusion_rle, shape))
     for scan in scans:
         if scan.note:  # it could not look (no monocular disparity, no VLM answer): it missed nothing
             scan.misses = 0

@@ -14,7 +14,7 @@ from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound, ServiceError
 from dataset.services.frames import FRAME_ORDER, frame_json, frame_total, update_frame
 from dataset.services.paging import bounded_count, keyset_page
-from dataset.services.validate import db_int
+from dataset.services.validate import db_int, reason_text
 
 REJECT_REASONS = ("blurry", "occluded", "no illusion", "watermark", "duplicate")
 
@@ -33,11 +33,9 @@ def review_frame(session: Session, frame_id: int, user: User | Any, decision: st
     """
     if decision not in DECISIONS:
         raise InvalidInput(f"decision must be one of {', '.join(DECISIONS)}")
-    reason = (reason or "").strip()
+    reason = reason_text(reason)
     if decision == "reject" and not reason:
         raise InvalidInput(f"a rejection needs a reason, e.g. {', '.join(REJECT_REASONS)}")
-    if len(reason) > 256:
-        raise InvalidInput("reason is longer than 256 characters")
     frame = session.get(Frame, frame_id, with_for_update=True)
     if frame is None:
         raise NotFound(f"no frame {frame_id}")
@@ -62,6 +60,7 @@ def review_many(session: Session, items: Sequence[dict[str, Any]], user: User | 
     """Bulk review; each item ``{"id", "revision"}`` succeeds or fails on its own (a savepoint each)."""
     if not items or len(items) > 1000:
         raise InvalidInput("items must hold 1..1000 frames")
+    reason = reason_text(reason)  # one reason for every item: a bad one refuses the request
     results = []
     for item in items:
         if not isinstance(item, dict):

@@ -20,10 +20,12 @@ from dataset.models import (
     Video,
     utcnow,
 )
+from dataset.redact import shown
 from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.frames import update_frame
 from dataset.services.paging import Page, keyset_page
+from dataset.services.validate import reason_text
 
 # What curators most often find wrong with a generated sample (the reject reason picker).
 REJECT_REASONS = ("surface not flat", "mask misses the illusion", "wrong support region", "bad right view",
@@ -41,7 +43,7 @@ def sample_json(sample: Sample, frame: Frame, video: Video) -> dict[str, Any]:
         "id": sample.id, "frame_id": frame.id, "video_id": video.id, "video": video.name, "index": frame.index,
         "time_s": frame.time_s, "width": frame.width, "height": frame.height, "state": sample.state.value,
         "flagged": sample.flagged, "annotation_version": sample.annotation_version, "files": sample.files,
-        "params": sample.params, "provenance": sample.provenance, "qa": sample.qa,
+        "params": sample.params, "provenance": shown(sample.provenance), "qa": sample.qa,
         "created_at": sample.created_at.isoformat() + "Z",
     }
 
@@ -87,7 +89,8 @@ def review_sample(session: Session, sample_id: int, user: User | Any, decision: 
     annotator who submitted it, first in their queue, with the reason: :func:`returned_note`)."""
     if decision not in ("accept", "reject"):
         raise InvalidInput("decision must be accept or reject")
-    if decision == "reject" and not reason.strip():
+    reason = reason_text(reason)
+    if decision == "reject" and not reason:
         raise InvalidInput("a rejection needs a reason, e.g. 'wall not flat', 'mask misses the frame'")
     sample = session.get(Sample, sample_id, with_for_update=True)
     if sample is None:
@@ -104,7 +107,7 @@ def review_sample(session: Session, sample_id: int, user: User | Any, decision: 
     if decision == "reject" and ann is not None:
         # The regions stay as a draft, so the annotator fixes rather than redoes them.
         ann.submitted, ann.updated_at = False, utcnow()
-    audit.record(session, user.id, f"sample.{decision}", "sample", sample.id, reason=reason.strip(), frame_id=frame.id)
+    audit.record(session, user.id, f"sample.{decision}", "sample", sample.id, reason=reason, frame_id=frame.id)
     session.flush()
     return sample
 

@@ -13,13 +13,14 @@ from typing import Any
 import cv2
 import numpy as np
 from sqlalchemy import select, update
+from sqlalchemy.orm import Session
 
 from annotation.segment import Embedding, EmbeddingCache, Segmenter, SegmentError, make_segmenter
 from annotation.segment.cache import cached_embedding
 from dataset.db import transaction
 from dataset.formats import FormatError, mask_to_rle, rle_to_mask
 from dataset.media import MediaStore
-from dataset.models import Annotation, Frame, FrameState, Region, RegionKind, utcnow
+from dataset.models import Annotation, Frame, FrameState, Job, JobState, Region, RegionKind, utcnow
 from dataset.services.errors import InvalidInput
 from dataset.services.frames import get_frame
 from dataset.services.jobs import JobContext
@@ -71,7 +72,7 @@ def segment(settings: Settings, media: MediaStore, frame: Frame, body: dict[str,
         raise InvalidInput("region_kind must be illusion or support")
     segmenter = settings_segmenter(settings)
     try:
-        prev = rle_to_mask(body["prev_mask"]) if body.get("prev_mask") else None
+        prev = rle_to_mask(body["prev_mask"], (frame.height, frame.width)) if body.get("prev_mask") else None
         embedding, cached = _hot_embedding(settings, segmenter, frame, media)
         candidates = segmenter.predict(embedding, points, labels, box, prev)
     except (SegmentError, FormatError) as exc:
@@ -114,6 +115,24 @@ def _hot_embedding(settings: Settings, segmenter: Segmenter, frame: Frame, media
     return embedding, cached
 
 
+def frames_to_encode(session: Session, settings: Settings, frame_ids: Sequence[int]) -> list[int]:
+    """Those of ``frame_ids`` without an embedding that no queued or running ``encode`` job is about to
+    compute: what a worker should encode ahead (a lease renewed every few minutes queues nothing twice)."""
+    frames = session.scalars(select(Frame).where(Frame.id.in_(frame_ids))).all()
+    missing = {f.id for f in frames if not embedding_ready(settings, f)}
+    if not missing:
+        return []
+    coming = frames_coming(session, "encode")
+    return [fid for fid in dict.fromkeys(frame_ids) if fid in missing and fid not in coming]
+
+
+def frames_coming(session: Session, kind: str) -> set[int]:
+    """The ``frame_ids`` of the queued and running jobs of ``kind`` (``encode``, ``propose``): few of them
+    wait at any time (an annotator's next frames, chunks of approvals), so reading their params is cheap."""
+    return {fid for params in session.scalars(select(Job.params).where(
+        Job.kind == kind, Job.state.in_((JobState.queued, JobState.running)))) for fid in params.get("frame_ids", [])}
+
+
 def encode_frames(settings: Settings, media: MediaStore, frames: Sequence[Frame]) -> int:
     """Compute and cache embeddings for frames that lack one; returns how many were computed."""
     segmenter, cache, done = settings_segmenter(settings), embedding_cache(settings), 0
@@ -149,7 +168,7 @@ def propagate_job(ctx: JobContext) -> dict[str, Any]:
         following = s.scalars(select(Frame).where(Frame.video_id == start.video_id, Frame.index > start.index,
                                                   Frame.state == FrameState.approved)
                               .order_by(Frame.index).limit(int(p["count"]))).all()
-    mask = rle_to_mask(p["mask"])
+    mask = rle_to_mask(p["mask"], (start.height, start.width))
     images = [load_rgb(ctx.media, f.media_key) for f in [start, *following]]
     masks = settings_segmenter(ctx.settings).propagate(images, mask, progress=lambda f: ctx.progress(0.9 * f))
     written, skipped = [], []

@@ -1,6 +1,7 @@
 """Training runs: launching one over a pinned dataset version, and mirroring its progress into the database.
 
-A run is a directory ``<home>/runs/<id>/`` and a :class:`TrainingRun` row. The product writes
+A run is a directory ``<home>/runs/<id>/`` (``runs/`` may be an admin's link to shared storage; the
+run's own folder is never a link: see ``dataset.contained``) and a :class:`TrainingRun` row. The product writes
 ``run.json`` (the engine's whole input: config, dataset version, splits) once, atomically; the
 engine (``torchrun -m model.train RUN_DIR``) appends events to ``progress.jsonl`` and writes
 checkpoints, and the train job feeds those events to :func:`apply_events`. Config resolution
@@ -22,11 +23,13 @@ from sqlalchemy import and_, func, or_, select
 from sqlalchemy.orm import Session
 
 from dataset.atomic import atomic_write_bytes
+from dataset.contained import LinkedFolder, owned_folder
 from dataset.export.splits import parse_split_spec, split_of
 from dataset.media import MediaStore
 from dataset.models import Frame, IllusionType, JobState, RunState, Sample, SampleState, TrainingMetric, TrainingRun, User, utcnow
 from dataset.readers import READER_FORMATS, open_reader
 from dataset.readers.version import pin_dataset_version, split_by_video, version_counts, version_media_keys
+from dataset.redact import shown
 from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 
@@ -74,7 +77,9 @@ class Launch:
 
 
 def run_dir(runs_dir: Path, run_id: int) -> Path:
-    return runs_dir / str(run_id)
+    """The run's folder, ``runs/<id>``, for reading and writing; LinkedFolder (a 404) when it is a
+    symbolic link, so nothing reads or writes through one."""
+    return owned_folder(runs_dir, str(run_id))
 
 
 def parse_split(text: str) -> dict[str, float]:
@@ -138,7 +143,11 @@ def pin_selection(session: Session, media: MediaStore, selection: DataSelection)
 
 def _pin_folder(selection: DataSelection) -> dict[str, Any]:
     """A folder's version: its sample names (a folder's files are the user's to keep unchanged)."""
-    reader = open_reader(selection.format, Path(selection.root or ""))
+    root = selection.root or ""
+    try:
+        reader = open_reader(selection.format, Path(root))
+    except InvalidInput as exc:  # the reader names the folder by its path: answers name it by its label
+        raise InvalidInput(str(exc).replace(root, selection.label or Path(root).name)) from None
     names = list(reader.names)
     if not names:
         raise InvalidInput(f"nothing to train on: the {selection.describe()} holds no samples")
@@ -297,7 +306,7 @@ def checkpoint_files(directory: Path) -> list[dict[str, Any]]:
     ``best.pt``, whose step is the run's ``best_step``), bytes and path (never for answers).
     Symbolic links and files of other names are not the run's checkpoints."""
     folder = directory / "checkpoints"
-    if directory.is_symlink() or folder.is_symlink():  # a planted link could point anywhere
+    if folder.is_symlink():  # a planted link could point anywhere (run_dir refuses the run's own folder as one)
         return []
     found = []
     for path in folder.iterdir() if folder.is_dir() else []:
@@ -313,19 +322,23 @@ def checkpoint_files(directory: Path) -> list[dict[str, Any]]:
 def run_json(run: TrainingRun, runs_dir: Path, *, current: dict[str, Any] | None = None,
              full: bool = False) -> dict[str, Any]:
     """What the CLI (``--json``) and the API say about a run; ``full`` adds config, version and splits."""
-    directory = run_dir(runs_dir, run.id)
-    last = directory / run.last_checkpoint if run.last_checkpoint else None
-    best = directory / "checkpoints" / "best.pt"
+    try:
+        directory: Path | None = run_dir(runs_dir, run.id)
+    except LinkedFolder:  # the row is still shown, none of the files the link leads to
+        directory = None
+    last = directory / run.last_checkpoint if directory and run.last_checkpoint else None
+    best = directory / "checkpoints" / "best.pt" if directory else None
     # Answers name files inside the run's folder, never by their server path.
     duration = ((run.finished_at or utcnow()) - run.started_at).total_seconds() if run.started_at else None
     state = effective_state(run)
-    reason = run.reason or (run.job.error if state != run.state and run.job is not None else None)
+    # The engine's own words (an exception's) or the job's error: either may quote a server path.
+    reason = shown(run.reason or (run.job.error if state != run.state and run.job is not None else None))
     data: dict[str, Any] = {
         "run": run.id, "job": run.job_id, "state": state.value, "preset": run.preset,
         "step": run.step, "steps": run.steps or run.config.get("train", {}).get("steps", 0),
         "progress": (run.step / run.steps) if run.steps else 0.0,
         "checkpoint": last.name if last is not None and last.is_file() else None,
-        "best_checkpoint": best.name if best.is_file() else None,
+        "best_checkpoint": best.name if best is not None and best.is_file() else None,
         "resumed_from_step": run.resumed_from_step, "world_size": run.world_size,
         "loss": run.loss, "lr": run.lr, "samples_per_s": run.samples_per_s, "eta_s": run.eta_s,
         "best_val_epe": run.best_val_epe, "best_step": run.best_step, "last_val": run.last_val or None,
@@ -333,15 +346,16 @@ def run_json(run: TrainingRun, runs_dir: Path, *, current: dict[str, Any] | None
         "dataset": {"id": run.dataset_id, "samples": len(run.dataset.get("items", [])),
                     "kinds": kind_counts(run.dataset), "filters": run.dataset.get("filters", {}),
                     "splits": {name: len(ids) for name, ids in run.splits.items()}},
-        "launch": run.launch, "run_dir": f"runs/{run.id}",
+        "launch": shown(run.launch), "run_dir": f"runs/{run.id}",
         "current": bool(current and current.get("run") == run.id),
         "created_by": run.created_by.name if run.created_by else None,
         "created_at": _iso(run.created_at), "started_at": _iso(run.started_at),
         "finished_at": _iso(run.finished_at), "duration_s": duration,
     }
     if full:
-        data.update(config=run.config, version=run.dataset, splits=run.splits,
-                    checkpoints=[{k: v for k, v in f.items() if k != "path"} for f in checkpoint_files(directory)])
+        files = checkpoint_files(directory) if directory is not None else []
+        data.update(config=shown(run.config), version=run.dataset, splits=run.splits,
+                    checkpoints=[{k: v for k, v in f.items() if k != "path"} for f in files])
     return data
 
 

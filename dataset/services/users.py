@@ -22,18 +22,19 @@ from dataset.models import ApiToken, Role, User, utcnow
 from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.sessions import end_user_sessions
-from dataset.services.validate import DB_INT_MAX
+from dataset.services.validate import DB_INT_MAX, shown
 from dataset.wording import plural
 
 _NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")  # always fullmatch: "$" would let "admin\n" through
 MIN_PASSWORD = 8
+MAX_PASSWORD = 1024  # hashing a password costs in its length; no one types more
 
 
 def parse_role(value: str) -> Role:
     try:
         return Role(value)
     except ValueError:
-        raise InvalidInput(f"unknown role {value!r}; choose one of {', '.join(Role)}") from None
+        raise InvalidInput(f"unknown role {shown(value)}; choose one of {', '.join(Role)}") from None
 
 
 def create_user(session: Session, name: str, role: Role | str, password: str) -> User:
@@ -55,6 +56,8 @@ def create_user(session: Session, name: str, role: Role | str, password: str) ->
 def _check_password(password: str) -> None:
     if len(password) < MIN_PASSWORD:
         raise InvalidInput(f"password must have at least {MIN_PASSWORD} characters")
+    if len(password) > MAX_PASSWORD:
+        raise InvalidInput(f"password must have at most {MAX_PASSWORD} characters")
 
 
 def get_user(session: Session, name: str) -> User:

@@ -9,6 +9,9 @@ from dataset.services.errors import InvalidInput
 # Ids, revisions and counts are INTEGER columns: 32 bits on PostgreSQL (PostgreSQL casts a
 # parameter to the column's type and fails beyond it), so that is the bound for every backend.
 DB_INT_MAX = 2**31 - 1
+TEXT_CHARS = 1000  # any text field a request carries, unless the field says less
+REASON_CHARS = 256  # a reviewer's reason: stored, and shown to the annotator on their page
+_SHOWN_CHARS = 40
 
 
 def db_int(value: Any, what: str, *, minimum: int = -DB_INT_MAX, maximum: int = DB_INT_MAX) -> int:
@@ -20,10 +23,25 @@ def db_int(value: Any, what: str, *, minimum: int = -DB_INT_MAX, maximum: int = 
     return value
 
 
-def optional_text(value: Any, what: str) -> str:
-    """A string field that may be absent (``""``); any other type is refused, never stringified."""
+def optional_text(value: Any, what: str, *, max_chars: int = TEXT_CHARS) -> str:
+    """A string field of at most ``max_chars`` characters that may be absent (``""``); any other type is
+    refused, never stringified."""
     if value is None:
         return ""
     if not isinstance(value, str):
         raise InvalidInput(f"{what} must be a string")
+    if len(value) > max_chars:
+        raise InvalidInput(f"{what} must have at most {max_chars} characters")
     return value
+
+
+def reason_text(value: str) -> str:
+    """A reviewer's reason, stripped, of at most REASON_CHARS characters (kept as written: it is the
+    reviewer's text for the person it goes to)."""
+    return optional_text((value or "").strip(), "reason", max_chars=REASON_CHARS)
+
+
+def shown(value: Any) -> str:
+    """A client's value as an error message quotes it: its repr, cut short (errors do not echo requests)."""
+    text = repr(value)
+    return text if len(text) <= _SHOWN_CHARS else text[:_SHOWN_CHARS - 1] + "…"

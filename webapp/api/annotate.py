@@ -8,7 +8,7 @@ from flask import g
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
-from dataset.formats import FormatError, rle_to_mask
+from dataset.formats import FormatError, mask_to_rle, rle_to_mask
 from dataset.models import Frame, RegionKind, Role, User
 from dataset.services import annotate, leases, proposals, segmentation
 from dataset.services import jobs as job_service
@@ -27,7 +27,7 @@ def _prefetch(frame: Frame) -> None:
     """Queue embeddings and proposals for this frame and the next ones of its video, so clicks never wait."""
     settings = runtime().settings
     ids = leases.prefetch_ids(g.db, frame)
-    missing = [i for i in ids if not segmentation.embedding_ready(settings, g.db.get(Frame, i))]
+    missing = segmentation.frames_to_encode(g.db, settings, ids)
     if missing:
         runtime().submit(g.db, "encode", {"frame_ids": missing}, g.db.get(User, current_user.id))
     queue_proposals(ids)
@@ -76,7 +76,7 @@ def reject_proposal(frame_id: int, proposal_id: int) -> ResponseReturnValue:
 @api.post("/frames/<int:frame_id>/lease")
 @requires(Role.annotator)
 def renew_lease(frame_id: int) -> ResponseReturnValue:
-    expires = leases.renew_lease(g.db, frame_id, current_user, runtime().settings.annotation_lease_s)
+    expires = annotate.take_lease(g.db, frame_id, current_user, runtime().settings.annotation_lease_s)
     _prefetch(g.db.get(Frame, frame_id))  # a frame opened directly (or by ←/→) gets prepared too
     g.db.commit()
     return {"frame_id": frame_id, "lease_expires": _iso(expires)}
@@ -85,8 +85,12 @@ def renew_lease(frame_id: int) -> ResponseReturnValue:
 @api.post("/frames/<int:frame_id>/lease/release")
 @requires(Role.annotator)
 def release_lease(frame_id: int) -> ResponseReturnValue:
-    leases.release_lease(g.db, frame_id, current_user)
+    """``released`` says whether the caller's lease was let go; false (with the reason) when they held none.
+    Someone else's lease is a 409: it is theirs to give back."""
+    released = annotate.give_back(g.db, frame_id, current_user)
     g.db.commit()
+    if not released:
+        return {"frame_id": frame_id, "released": False, "reason": f"you hold no lease on frame {frame_id}"}
     return {"frame_id": frame_id, "released": True}
 
 
@@ -135,13 +139,12 @@ def propagate(frame_id: int) -> ResponseReturnValue:
         raise InvalidInput("count must be 1..100 frames")
     frame = get_or_404(Frame, frame_id, "frame")
     try:
-        shape = rle_to_mask(body.get("mask")).shape
+        mask = rle_to_mask(body.get("mask"), (frame.height, frame.width))
     except FormatError as exc:
         raise InvalidInput(f"mask: {exc}") from None
-    if shape != (frame.height, frame.width):
-        raise InvalidInput(f"mask is {shape[1]}x{shape[0]}, the frame {frame.width}x{frame.height}")
+    # The job's params keep the compressed form, whatever the request sent (a list of runs is larger).
     job = runtime().submit(g.db, "propagate", {"frame_id": frame_id, "pair": pair, "kind": kind, "count": count,
-                                               "mask": body.get("mask"), "user_id": current_user.id},
+                                               "mask": mask_to_rle(mask), "user_id": current_user.id},
                            g.db.get(User, current_user.id))
     g.db.commit()
     return job_service.job_json(job), 202

@@ -47,9 +47,11 @@ def launch_evaluation() -> ResponseReturnValue:
 @requires(Role.curator)
 def evaluation_file(evaluation_id: int, name: str) -> ResponseReturnValue:
     """A file of the report folder (report.json, per_sample.csv, pictures, predictions) by relative path."""
-    path: Path = evaluations.report_file(evaluations.get_evaluation(g.db, evaluation_id), name)
+    evaluation = evaluations.get_evaluation(g.db, evaluation_id)
+    path: Path = evaluations.report_file(evaluation, name, runtime().settings.home)
     if path.suffix in _TEXT:  # written by a job, which may quote server paths (a sample's failure)
-        return Response(app_redactor()(path.read_bytes()), mimetype=_TEXT[path.suffix])
+        text = path.read_text(encoding="utf-8", errors="replace")
+        return Response(app_redactor()(text), mimetype=_TEXT[path.suffix])
     return send_file(path, max_age=0, conditional=True)
 
 

@@ -97,4 +97,5 @@ def download_checkpoint(run_id: int, name: str) -> ResponseReturnValue:
     """One of the run's checkpoint files by name (never a path the caller makes up, never a link)."""
     run = training.get_run(g.db, run_id)
     found = registry.run_checkpoint(runtime().settings.runs_dir, run.id, name, best_step=run.best_step)
-    return send_file(found.path, as_attachment=True, download_name=f"run{run_id}_{found.name}", max_age=0)
+    return send_file(found.path, mimetype="application/octet-stream", as_attachment=True,
+                     download_name=f"run{run_id}_{found.name}", max_age=0)

@@ -40,6 +40,9 @@ def list_videos() -> ResponseReturnValue:
                        "created_at": v.created_at.isoformat() + "Z"} for v in videos]}
 
 
+MAX_FILE_NAME = 255
+
+
 @api.post("/videos")
 @requires(Role.curator)
 def upload_video() -> ResponseReturnValue:
@@ -48,6 +51,8 @@ def upload_video() -> ResponseReturnValue:
     if upload is None or not upload.filename:
         raise InvalidInput("send the video as the multipart field 'file'")
     name = Path(upload.filename).name
+    if len(name) > MAX_FILE_NAME:  # stored and shown as the video's name; no file system takes longer names
+        raise InvalidInput(f"the file's name has {len(name)} characters; rename it to at most {MAX_FILE_NAME}")
     ext = Path(name).suffix.lower()
     if ext not in VIDEO_EXTENSIONS:
         raise InvalidInput(f"{name}: not a video file name (expected one of {', '.join(sorted(VIDEO_EXTENSIONS))})")

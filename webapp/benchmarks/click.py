@@ -78,7 +78,7 @@ def _bench_backend(rt: Runtime, frame_id: int, token: str, truths: list[np.ndarr
                 start = time.perf_counter()
                 segmenter.predict(embedding, np.array(points), np.array(labels), prev_mask=mask)
                 local.append((time.perf_counter() - start) * 1000)
-                mask = rle_to_mask(response.json()["mask"])
+                mask = rle_to_mask(response.json()["mask"], truth.shape)
     return {"http_p50_ms": round(float(np.percentile(http, 50)), 1), "http_p95_ms": round(float(np.percentile(http, 95)), 1),
             "in_process_p50_ms": round(float(np.percentile(local, 50)), 1), "encode_ms": round(encode_ms, 1),
             "response_kb_p50": round(float(np.percentile(response_bytes, 50)) / 1024, 1), "clicks": len(http)}

@@ -43,7 +43,7 @@ METHOD_CHOICES = [m.replace("_", "-") for m in METHODS] + list(METHODS)
 @click.option("--min-disparity", type=float, help="booster: ground truth below this is invalid (the authors' script: 1).")
 @click.option("--kitti-png", is_flag=True, help="Also write predictions as KITTI uint16 PNGs (disparity × 256).")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path),
-              help="Report folder (default: <data dir>/evaluations/<job id>).")
+              help="Report folder (default: <data dir>/evaluations/<job id>; the web serves only those).")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as one JSON object (with --wait/--here).")
 @run_options
 @pass_state

@@ -12,6 +12,7 @@ from huey import Huey, RedisHuey, SqliteHuey
 from sqlalchemy import event, select
 from sqlalchemy.orm import Session, sessionmaker
 
+from dataset.contained import resolve_storage
 from dataset.db import transaction
 from dataset.models import Job, JobState, User
 from dataset.services import jobs as job_rows
@@ -142,6 +143,7 @@ class JobQueue:
         lost jobs and re-sends the queue's queued jobs whose message was lost."""
         huey, sweep = self.hueys[queue], self.sweeps[queue]
         me = job_rows.worker_id()
+        resolve_storage(self.runtime.settings)  # runs/ and evaluations/ as they are now (dataset.contained)
         self._reap()
         stop = threading.Event()
         interval = min(job_rows.HEARTBEAT_S, max(sweep.grace_s / 2, 0.5))

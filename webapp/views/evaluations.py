@@ -17,7 +17,7 @@ from flask import Blueprint, abort, g, render_template, request, send_file
 from flask.typing import ResponseReturnValue
 
 from dataset.formats import read_pfm
-from dataset.models import Role, Sample
+from dataset.models import Evaluation, Role, Sample
 from dataset.preview.evaluation_maps import EVALUATION_IMAGES, evaluation_image
 from dataset.preview.images import encode_png
 from dataset.readers import READER_FORMATS
@@ -32,6 +32,7 @@ from model.evaluation import DEFAULT_METHODS
 from model.methods import METHODS
 from model.report import DEPTH_METRICS, TABLE_METRICS
 from webapp.auth import requires
+from webapp.redact import app_redactor
 from webapp.runtime import runtime
 
 bp = Blueprint("evaluations", __name__)
@@ -54,8 +55,8 @@ def index() -> ResponseReturnValue:
 def report(evaluation_id: int) -> ResponseReturnValue:
     """The report, from its ``report.json``."""
     evaluation = evaluations.get_evaluation(g.db, evaluation_id)
-    try:
-        data = json.loads(evaluations.report_file(evaluation, "report.json").read_text(encoding="utf-8"))
+    try:  # written by the job, which may quote server paths (a sample's failure)
+        data = app_redactor().value(json.loads(_report_file(evaluation, "report.json").read_text(encoding="utf-8")))
     except NotFound:
         data = None
     regions: list[str] = []
@@ -77,7 +78,7 @@ def sample(evaluation_id: int, sample_id: int) -> ResponseReturnValue:
     result = evaluations.sample_result(g.db, evaluation_id, sample_id, method)
     return render_template("evaluation_sample.html", evaluation=evaluations.evaluation_json(evaluation),
                            sample=sample_review.get_sample(g.db, sample_id), method=method, result=result,
-                           has_confidence=_confidence_path(evaluation.report_dir, result.prediction) is not None)
+                           has_confidence=_confidence_path(evaluation, result.prediction) is not None)
 
 
 @bp.get("/evaluations/<int:evaluation_id>/samples/<int:sample_id>/<method>/<image>.png")
@@ -90,8 +91,8 @@ def sample_image(evaluation_id: int, sample_id: int, method: str, image: str) ->
     result = evaluations.sample_result(g.db, evaluation_id, sample_id, method)
     if not result.prediction:
         abort(404, f"evaluation {evaluation_id} kept no {method} prediction of sample {sample_id}")
-    prediction = read_pfm(evaluations.report_file(evaluation, f"predictions/{method}/{result.prediction}"))
-    confidence_path = _confidence_path(evaluation.report_dir, result.prediction)
+    prediction = read_pfm(_report_file(evaluation, f"predictions/{method}/{result.prediction}"))
+    confidence_path = _confidence_path(evaluation, result.prediction)
     confidence = read_pfm(confidence_path) if confidence_path and image == "confidence" else None
     row = g.db.get(Sample, sample_id)
     gt = load_output(runtime().media, row.files["disparity"], "disparity")
@@ -105,8 +106,14 @@ def sample_image(evaluation_id: int, sample_id: int, method: str, image: str) ->
     return send_file(BytesIO(encode_png(rgb)), mimetype="image/png", max_age=0)
 
 
-def _confidence_path(report_dir: str | None, prediction: str | None) -> Path | None:
-    if not report_dir or not prediction:
+def _report_file(evaluation: Evaluation, name: str) -> Path:
+    return evaluations.report_file(evaluation, name, runtime().settings.home)
+
+
+def _confidence_path(evaluation: Evaluation, prediction: str | None) -> Path | None:
+    if not prediction:
         return None
-    path = Path(report_dir) / "predictions" / "confidence" / prediction
-    return path if path.is_file() else None
+    try:
+        return _report_file(evaluation, f"predictions/confidence/{prediction}")
+    except NotFound:
+        return None

@@ -6,6 +6,8 @@ API (``/api/v1/runs…``), which enforces the same roles.
 
 from __future__ import annotations
 
+from typing import Any
+
 from flask import Blueprint, Response, abort, g, render_template, send_file
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
@@ -16,7 +18,7 @@ from dataset.readers import READER_FORMATS
 from dataset.services import run_logs, training
 from model import registry
 from model.fit import suggest_crop
-from model.presets import load_preset
+from model.presets import PRESETS, load_preset
 from webapp.api.blueprint import id_list_arg, int_arg
 from webapp.auth import requires
 from webapp.redact import app_redactor
@@ -37,7 +39,18 @@ def runs() -> ResponseReturnValue:
                            roots=sorted(settings.dataset_roots), max_nproc=settings.train_max_nproc,
                            gpu=settings.train_devices == "cuda",
                            checkpoints=registry.named_checkpoints(g.db, settings.runs_dir),
-                           suggested_crop=suggest_crop(load_preset("lite"), training.smallest_accepted_image(g.db)))
+                           suggested_crop=suggest_crop(load_preset("lite"), training.smallest_accepted_image(g.db)),
+                           presets=_preset_values())
+
+
+def _preset_values() -> dict[str, dict[str, Any]]:
+    """What each preset trains with when a launch leaves a field empty: the form's placeholders."""
+    values = {}
+    for name in PRESETS:
+        train = load_preset(name).train
+        values[name] = {"steps": train.steps, "batch": train.batch_size, "lr": train.lr,
+                        "crop": "x".join(map(str, train.crop)), "iters": train.train_iters}
+    return values
 
 
 @bp.get("/models/runs/<int:run_id>")
@@ -65,7 +78,7 @@ def val_image(run_id: int, name: str) -> ResponseReturnValue:
     training.get_run(g.db, run_id)
     directory = training.run_dir(runtime().settings.runs_dir, run_id)
     path = contained_file(directory, name)
-    if path is None or path.suffix != ".png" or not path.is_relative_to(directory.resolve() / "val"):
+    if path is None or path.suffix != ".png" or not path.is_relative_to(directory / "val"):
         abort(404, f"run {run_id} has no validation image {name!r}")
     return send_file(path, mimetype="image/png", max_age=3600, conditional=True)
 
@@ -73,11 +86,13 @@ def val_image(run_id: int, name: str) -> ResponseReturnValue:
 @bp.get("/models/runs/<int:run_id>/log")
 @requires(Role.curator)
 def run_log(run_id: int) -> ResponseReturnValue:
-    """The tail of rank 0's log (``?lines=200``, at most 2000); server folders are rewritten out of
-    it like out of every JSON answer (``webapp/redact.py``)."""
+    """The tail of rank 0's log (``?lines=200``, at most 2000), its server folders rewritten out
+    (``dataset/redact.py``)."""
     training.get_run(g.db, run_id)
     count = int_arg("lines", 200, minimum=1, maximum=2000)
-    return {"run": run_id, **run_logs.tail(training.run_dir(runtime().settings.runs_dir, run_id), count)}
+    tail = run_logs.tail(training.run_dir(runtime().settings.runs_dir, run_id), count)
+    redact = app_redactor()
+    return {"run": run_id, **tail, "lines": [redact(line) for line in tail["lines"]]}
 
 
 @bp.get("/models/runs/<int:run_id>/log.txt")
@@ -91,7 +106,7 @@ def run_log_file(run_id: int) -> ResponseReturnValue:
     if not run_logs.rank0_files(directory):
         abort(404, f"run {run_id} has no log yet: its trainers have not started")
     redact = app_redactor()
-    lines = (redact(line.encode()) for line in run_logs.log_lines(directory))
+    lines = (redact(line).encode() for line in run_logs.log_lines(directory))
     return Response(lines, mimetype="text/plain",
                     headers={"Content-Disposition": f'attachment; filename="run{run_id}_rank0.log"',
                              "Cache-Control": "no-store"})

@@ -86,7 +86,7 @@ async function open(id, how) {
     const res = await call(`${API}/frames/${id}/lease`);
     if (sessionEnded(res.error)) throw res.error;
     if (res.ok) detail.lease = { ...detail.lease, mine: true, expires: res.data.lease_expires };
-    else reason = res.status === 409 ? OTHER_ANNOTATOR : res.error.message;
+    else reason = res.error.message;  // the server says why: someone else holds it, or it left the queue
   }
   await loaded;
 
@@ -146,7 +146,7 @@ function readOnly(reason) {
 async function takeOver() {
   const res = await call(`${API}/frames/${page.frame.id}/lease`);
   if (sessionEnded(res.error)) return;
-  if (!res.ok) return readOnly(res.status === 409 ? OTHER_ANNOTATOR : res.error.message);
+  if (!res.ok) return readOnly(res.error.message);
   hold(page.history.doc);
   say("You hold this frame now; changes are saved as drafts until you submit again.");
   render();
@@ -174,9 +174,9 @@ function hold(serverDoc) {
       if (sessionEnded(err)) return;
       say(`Could not save the draft (${err.message}); it is kept in this browser and retried.`, "error");
     }),
-    leaseLost: here((message) => {
-      readOnly("another annotator took it while your lease had run out");
-      say(`${message}. Your changes are kept in this browser.`, "error");
+    leaseLost: here((message) => {  // another annotator took it while the lease had run out, or it left the queue
+      readOnly(message);
+      say(`This frame is read-only: ${message}. Your changes are kept in this browser.`, "error");
     }),
   });
   page.session.keepLease(LEASE_S);
