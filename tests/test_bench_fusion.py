@@ -1,5 +1,5 @@
-"""`bench fusion` (issue 22, items 2 and 5) without training: the ablation networks' configs and what
-they predict, the validation split's own seeds, and the report's methods and timings."""
+"""`bench fusion` (issue 22, items 2 and 5; issue 30) without training: the ablation networks' configs and
+what they predict, the validation split's own seeds, and the report's methods, paired record and timings."""
 
 from __future__ import annotations
 
@@ -18,10 +18,10 @@ from model.losses import fusion_loss  # noqa: E402
 from model.network import FusionNetwork  # noqa: E402
 from model.presets import load_preset  # noqa: E402
 from webapp.benchmarks import fusion  # noqa: E402  (not its test_samples by name: pytest would collect it)
+from webapp.benchmarks.trunk import save_trunk  # noqa: E402
 from webapp.cli import main  # noqa: E402
 
 NETWORKS = {n.name: n for n in (fusion.FUSION, *fusion.ABLATIONS)}
-TRAIN_P99_PX = 43.87  # as tests/test_synthetic_mono.py: the prepared data's, fixes the pairs' baseline
 
 
 def _config(name: str):
@@ -43,7 +43,7 @@ def test_ablation_configs_differ_from_fusion_only_where_intended() -> None:
     for config in configs.values():  # trained the same way: same steps, crop, batch, schedule
         assert config.train == configs["fusion"].train
         assert config.train.steps == 20 and config.train.crop == (160, 288)
-    assert NETWORKS["no_vlm"].methods == {"fusion_no_vlm": "fusion"}
+    assert NETWORKS["no_vlm"].methods == {"fusion_no_vlm": "fusion", "stereo_no_vlm": "stereo"}
     assert NETWORKS["stereo_only"].methods == {"stereo_only": "stereo"}
     with pytest.raises(ValueError, match="use_mono = false"):
         load_preset("lite", {"model.use_mono": False})  # the VLM would condition a confidence that is not there
@@ -90,72 +90,112 @@ def test_validation_split_has_seeds_of_its_own() -> None:
     assert set(fusion.SPLITS) == {"test", "val"} and fusion.SPLITS["test"] == tuple(range(100, 104))
     val = set(fusion.SPLITS["val"])
     assert len(val) == 4 and not val & (training_seeds | set(fusion.TEST_SEEDS))
-    pairs, _render_s, info = fusion._held_out([0.0, TRAIN_P99_PX], "val")
+    pairs, _render_s, info = fusion._held_out("val")
     assert info["split"] == "val" and info["seeds"] == sorted(val) and info["samples"] == len(pairs) == 4 * fusion.FRAMES
+    assert info["baseline_m"] == fusion.HELD_OUT_BASELINE_M == 0.63
     assert {p.meta["seed"] for p in pairs} == val
-    test_probe, _ = fusion.test_samples([0.0, TRAIN_P99_PX], seeds=fusion.TEST_SEEDS[:1], frames=1)
+    test_probe = fusion.held_out_samples(fusion.TEST_SEEDS[:1], frames=1)
     assert test_probe[0].name.split("/")[0] not in {p.name.split("/")[0] for p in pairs}
     assert all(p.mono is not None and {"picture", "mirror", "non_illusion"} <= set(p.regions) for p in pairs)
     with pytest.raises(ValueError, match="unknown split"):
-        fusion._held_out([0.0, TRAIN_P99_PX], "train")
+        fusion._held_out("train")
 
 
-class _Closed:
+class _Workspace:
+    """What run_fusion_bench needs of a prepared workspace when training is replaced."""
+
+    def __init__(self, home: Path) -> None:
+        self.settings = type("Settings", (), {"home": home})()
+
     def close(self) -> None:
         pass
 
 
-def test_report_carries_every_method_and_the_timings(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """run_fusion_bench end to end with untrained networks in place of training and one frame per seed:
-    every run launched before any trains, the trainings run by ``workers`` at once."""
+CONDITIONS = {"mirror_fooling_px": {"frames": 2, "min": 5.0, "median": 6.0, "max": 7.0},
+              "aligned_mono_epe_px": {"frames": 2, "min": 1.0, "median": 2.0, "max": 3.0}}
+
+
+def test_report_carries_every_method_the_paired_record_and_the_timings(tmp_path: Path,
+                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """run_fusion_bench end to end, fine-tuning from a trunk, with each network's init checkpoint (the
+    trunk's tensors and fresh ones) scored in place of its training and one frame per seed: every run
+    launched before any trains, from its init, the trainings run by ``workers`` at once."""
+    torch.manual_seed(0)
+    pretrain_config = load_preset("lite", {"model.use_vlm": False})
+    save_checkpoint(tmp_path / "pre.pt", FusionNetwork(pretrain_config.model), pretrain_config, step=0)
+    trunk_file = tmp_path / "pretrain" / "trunk.safetensors"
+    save_trunk(tmp_path / "pre.pt", trunk_file, {"steps": 0})
     launched: list[tuple[int, str]] = []
     checkpoints: dict[int, Path] = {}
     drained: list[int] = []
 
-    def untrained(_rt: Any, seed: int, steps: int, network: fusion.Network) -> int:
+    def from_init(_rt: Any, seed: int, overrides: dict[str, Any], *, init: Path | None = None) -> int:
         assert not drained, "a run launched after the trainings ran"
-        torch.manual_seed(seed)
-        config = load_preset("lite", fusion.network_overrides(network, steps))
-        path = tmp_path / f"{network.name}-{seed}.pt"
-        save_checkpoint(path, FusionNetwork(config.model), config, step=0)
-        launched.append((seed, network.name))
-        checkpoints[len(launched)] = path
+        assert init is not None and init.is_file()
+        name = next(n for n, network in NETWORKS.items() if overrides == fusion.network_overrides(network, 20))
+        launched.append((seed, name))
+        checkpoints[len(launched)] = init
         return len(launched)
 
     rendered: list[tuple[int, ...]] = []
-    render = fusion.test_samples
+    render = fusion.held_out_samples
 
-    def one_frame(train_range: list[float], seeds: tuple[int, ...]) -> Any:
+    def one_frame(seeds: tuple[int, ...]) -> Any:
         rendered.append(seeds)
-        return render(train_range, seeds=seeds[:2], frames=1)
+        return render(seeds[:2], frames=1)
 
-    monkeypatch.setattr(fusion, "prepared_workspace", lambda _home: (_Closed(), True))
-    monkeypatch.setattr(fusion, "training_disparity_range", lambda _rt: [0.0, TRAIN_P99_PX])
-    monkeypatch.setattr(fusion, "_launch", untrained)
-    monkeypatch.setattr(fusion, "_run_jobs", lambda _rt, workers: drained.append(workers))
-    monkeypatch.setattr(fusion, "_trained", lambda _rt, run_id: (checkpoints[run_id], 0.5 * run_id))
-    monkeypatch.setattr(fusion, "test_samples", one_frame)
-    report = fusion.run_fusion_bench(tmp_path, seeds=2, steps=20, ablations=True, split="val", workers=2)
+    monkeypatch.setattr(fusion, "prepared_workspace",
+                        lambda home: (_Workspace(home), True, {"captures": CONDITIONS, "generated": CONDITIONS}))
+    monkeypatch.setattr(fusion, "training_disparity_range", lambda _rt: [3.0, 44.0])
+    monkeypatch.setattr(fusion, "training_seeds", lambda _rt, count: [0, 7][:count])
+    monkeypatch.setattr(fusion, "launch_run", from_init)
+    monkeypatch.setattr(fusion, "run_jobs", lambda _rt, workers: drained.append(workers))
+    monkeypatch.setattr(fusion, "trained_checkpoint", lambda _rt, run_id: (checkpoints[run_id], 0.5 * run_id))
+    monkeypatch.setattr(fusion, "held_out_samples", one_frame)
+    report = fusion.run_fusion_bench(tmp_path, seeds=2, steps=20, ablations=True, split="val", workers=2,
+                                     pretrained=trunk_file)
     assert rendered == [fusion.VAL_SEEDS]
-    assert launched == [(s, n) for s in (0, 1) for n in ("fusion", "no_vlm", "stereo_only")]
+    assert launched == [(s, n) for s in (0, 7) for n in ("fusion", "no_vlm", "stereo_only")]
     assert drained == [2] and report["workers"] == 2
     methods = report["methods"]
-    assert list(methods) == ["fusion", "stereo", "fusion_no_vlm", "stereo_only", "mono_gt_align", "sgbm"]
+    trained = ["fusion", "stereo", "fusion_no_vlm", "stereo_no_vlm", "stereo_only"]
+    assert list(methods) == [*trained, "mono_gt_align", "sgbm"]
     for method, regions in methods.items():
         assert set(regions) == set(fusion.REGIONS)
         for figures in regions.values():
             trained_method = method not in fusion.BASELINES
             assert set(figures) == ({"epe", "bad2", "epe_spread", "bad2_spread"} if trained_method else {"epe", "bad2"})
             assert all(np.isfinite(v) and v >= 0 for v in figures.values())
-    # two seeds of fresh networks differ; the untrained baselines are scored once
-    assert methods["fusion"]["all"]["epe_spread"] > 0
+    # the fresh heads of two seeds differ; the stereo-only network is all trunk, so its seeds start alike
+    assert methods["fusion"]["all"]["epe_spread"] > 0 and methods["stereo_only"]["all"]["epe_spread"] == 0
+    # the paired record: every seed's figures, and fusion against every other method
+    assert [(r["seed"], r["train_seed"]) for r in report["per_seed"]] == [(0, 0), (1, 7)]
+    assert report["train_seeds"] == [0, 7] and report["split_seed"] == fusion.SPLIT_SEED
+    for k, record in enumerate(report["per_seed"]):
+        assert list(record["methods"]) == trained and record["runs"] == {"fusion": 3 * k + 1, "no_vlm": 3 * k + 2,
+                                                                        "stereo_only": 3 * k + 3}
+    paired = report["paired"]
+    assert paired["reference"] == "fusion" and paired["seeds"] == 2
+    assert list(paired["against"]) == [*trained[1:], "mono_gt_align", "sgbm"]
+    runs = report["per_seed"]
+    mean = (runs[0]["methods"]["fusion"]["mirror"]["epe"] - runs[0]["methods"]["stereo_no_vlm"]["mirror"]["epe"]
+            + runs[1]["methods"]["fusion"]["mirror"]["epe"] - runs[1]["methods"]["stereo_no_vlm"]["mirror"]["epe"]) / 2
+    assert paired["against"]["stereo_no_vlm"]["mirror"]["epe"] == pytest.approx(mean, abs=2e-3)
+    # what each network took from the trunk, and what started fresh
+    init = report["pretrained"]["init"]
+    assert report["pretrained"]["sha256"] == json.loads((trunk_file.with_suffix(".json")).read_text())["sha256"]
+    assert {name: init[name]["loaded"] for name in init} == {"fusion": 126, "no_vlm": 126, "stereo_only": 126}
+    assert {n.split(".")[0] for n in init["fusion"]["fresh"]} == {"vlm", "confidence", "fusion"}
+    assert {n.split(".")[0] for n in init["no_vlm"]["fresh"]} == {"confidence", "fusion"}
+    assert init["stereo_only"]["fresh"] == [] and all(not i["unused"] for i in init.values())
+    assert report["conditions"]["training"] == {"captures": CONDITIONS, "generated": CONDITIONS}
+    assert set(report["conditions"]["held_out"]) == {"mirror_fooling_px", "aligned_mono_epe_px"}
     timings = report["timings_s"]
     assert set(timings) == {"prepare", "render_pairs", "score_baselines", "train", "train_wall", "score", "total"}
     assert timings["train"] == {"fusion": [0.5, 2.0], "no_vlm": [1.0, 2.5], "stereo_only": [1.5, 3.0]}
     assert all(len(v) == 2 and min(v) > 0 for v in timings["score"].values())
     assert report["pairs"]["split"] == "val" and report["pairs"]["seeds"] == list(fusion.VAL_SEEDS)
-    assert report["runs"] == [{"seed": 0, "fusion": 1, "no_vlm": 2, "stereo_only": 3},
-                              {"seed": 1, "fusion": 4, "no_vlm": 5, "stereo_only": 6}]
+    assert report["pairs"]["baseline_m"] == 0.63 and report["protocol"] == 2
     assert report["networks"]["stereo_only"]["overrides"] == {"model.use_vlm": False, "model.use_mono": False}
     json.dumps(report, allow_nan=False)
 
@@ -167,13 +207,25 @@ def test_aggregate_gives_mean_and_spread_over_seeds() -> None:
     assert fusion._aggregate(runs[:1]) == {"fusion_no_vlm": {"all": {"epe": 1.0, "bad2": 10.0}}}
 
 
-def test_cli_passes_ablations_and_split(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_cli_passes_ablations_split_and_the_trunk(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     calls: list[dict[str, Any]] = []
     monkeypatch.setattr(fusion, "run_fusion_bench", lambda work_dir, **kw: calls.append(kw) or {"ok": 1})
-    result = CliRunner().invoke(main, ["bench", "fusion", "--json", "--ablations", "--split", "val", "--steps", "20"])
+    work = ["--work-dir", str(tmp_path)]
+    result = CliRunner().invoke(main, ["bench", "fusion", "--json", "--ablations", "--split", "val", "--steps", "20", *work])
     assert result.exit_code == 0, result.output
-    assert calls == [{"seeds": 1, "steps": 20, "ablations": True, "split": "val", "workers": 1}]
-    for flags in (["--ablations"], ["--workers", "2"]):
+    assert calls == [{"seeds": 1, "steps": 20, "ablations": True, "split": "val", "workers": 1, "pretrained": None}]
+    trunk = tmp_path / "pretrain" / "trunk.safetensors"
+    trunk.parent.mkdir()
+    trunk.write_bytes(b"")
+    for flags, expected in (([], trunk), (["--scratch"], None), (["--pretrained", str(tmp_path / "other")], None)):
+        (tmp_path / "other").write_bytes(b"")
+        calls.clear()
+        result = CliRunner().invoke(main, ["bench", "fusion", "--json", *work, *flags])
+        assert result.exit_code == 0, result.output
+        assert calls[0]["pretrained"] == (expected if flags[:1] != ["--pretrained"] else tmp_path / "other"), flags
+    for flags in (["--ablations"], ["--workers", "2"], ["--scratch"], ["--pretrained", str(trunk)]):
         result = CliRunner().invoke(main, ["bench", "fusion", "--mono-only", *flags])
         assert result.exit_code == 2 and "--mono-only" in result.output, flags
+    result = CliRunner().invoke(main, ["bench", "fusion", "--scratch", "--pretrained", str(trunk)])
+    assert result.exit_code == 2 and "--scratch" in result.output
     assert CliRunner().invoke(main, ["bench", "fusion", "--split", "train"]).exit_code == 2

@@ -3,16 +3,28 @@
 Training data, made by the product itself: (a) synthetic videos ingested, approved, annotated from
 their true masks, generated and accepted — as ``demo`` does — and (b) rendered stereo pairs of
 other seeds imported as captures, whose raytraced right views show stereo fooled by mirrors (the
-generated samples never do: their right views are warped from the rectified disparity). A short
-``lite`` run trains on them through the real training job. The test set is rendered pairs of yet
-other seeds, never seen in training or validation, rendered with a baseline that brings their
-disparities into the training range, with their realistic monocular disparity (relative, coarse,
-fooled by pictures and partly by mirrors: ``dataset.synthetic.mono``) as the monocular input.
-Validation pairs of their own seeds (``split="val"``), rendered alike, are what the model's decisions
-are made on, so that the test pairs are scored once. Every method is scored densely over the same
-valid pixels. ``ablations`` trains, per seed, the no-VLM and stereo-only networks beside fusion
-(ABLATIONS). ``run_mono_bench`` scores mono-gt-align alone, without training: the figure the
-monocular model was calibrated on.
+generated samples never do: their right views are warped from the rectified disparity). Short
+``lite`` runs train on them through the real training job, from scratch or fine-tuned from the
+pre-trained trunk of ``bench pretrain`` (``webapp.benchmarks.pretrain``).
+
+The training data shows the test's conditions, not its seeds (protocol 2, issue 30): each capture
+video is rendered at a baseline drawn for it from TRAIN_BASELINE_M, a range covering the held-out
+pairs' disparities (so its mirrors fool stereo as much as theirs do), and each generated sample's
+monocular input is an independent realistic draw (``dataset.synthetic.mono``'s estimator, another
+one than the map its ground truth was made from), not that map itself — in the benchmark only: the
+product's generation keeps deriving the ground truth from the monocular map, as the paper does.
+
+The held-out pairs are frozen: rendered pairs of seeds never seen in training, at the constant
+baseline HELD_OUT_BASELINE_M, whatever the training data holds, with their realistic monocular
+disparity as the monocular input; the JSON records their baseline and a hash of their pixels. The
+test pairs (TEST_SEEDS) are scored once; the validation pairs (VAL_SEEDS, ``split="val"``) are what
+the model's decisions are made on. Every method is scored densely over the same valid pixels.
+
+The record is paired: the train/val split of the training data is the same for every benchmark
+seed (SPLIT_SEED's), so a seed changes only the training (initialisation, order, augmentation);
+every seed's figures are kept, and fusion's differences against each other method are taken seed
+by seed. ``ablations`` trains, per seed, the no-VLM and stereo-only networks beside fusion
+(ABLATIONS). ``run_mono_bench`` scores mono-gt-align alone, without training.
 
 Preparing the data is cached in the work folder; preparing, rendering the held-out pairs, each
 network's training and each scoring are timed apart.
@@ -20,23 +32,27 @@ network's training and each scoring are timed apart.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import statistics
 import time
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from sqlalchemy import select
+from sqlalchemy.orm import Session
 
 from dataset.capture.synthetic import import_rendered_video
 from dataset.db import transaction
-from dataset.models import Frame, FrameState, Job, JobState, Role, TrainingRun, User
+from dataset.media import MediaStore
+from dataset.models import Frame, FrameState, Job, JobState, Role, Sample, SampleState, TrainingRun, User, Video
 from dataset.readers import StereoSample
 from dataset.readers.base import make_regions
 from dataset.readers.version import VersionReader, pin_dataset_version
+from dataset.samples import load_output, mask_name, store_outputs
 from dataset.services import jobs as job_service
 from dataset.services import training
 from dataset.services import users as user_service
@@ -44,16 +60,19 @@ from dataset.services.demo import accept_generated_samples, seed_reviews_and_ann
 from dataset.services.ingest import ingest_params
 from dataset.services.review import review_frame
 from dataset.services.sample_review import review_sample
-from dataset.synthetic import render_video, write_synthetic_dataset
+from dataset.synthetic import SyntheticVideo, render_video, write_synthetic_dataset
 from dataset.synthetic.io import FORMAT as SYNTHETIC_FORMAT
-from dataset.synthetic.layout import BASELINE_M
-from model.evaluate import EvalOptions, evaluate
+from dataset.synthetic.mono import realistic_mono, sample_mono_model
+from model.evaluate import EvalOptions, evaluate, sample_metrics
 from model.methods import Predict, build_methods
+from model.presets import load_preset
+from webapp.benchmarks.trunk import Trunk, compose_init, load_trunk
 from webapp.cli.workspace import init_workspace
 from webapp.jobs import runs as run_control
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime
 
+PROTOCOL = 2  # 1: pairs at a baseline derived from the training data, a split per seed; 2: issue 30's
 SIZE = (320, 192)  # W x H of every rendered frame
 FRAMES = 6  # per video
 GENERATED_VIDEOS = 6  # seeds 0..5 through the pipeline
@@ -61,12 +80,21 @@ RENDERED_SEEDS = tuple(range(40, 46))  # imported as captures
 TEST_SEEDS = tuple(range(100, 104))  # held out: never in training or validation; scored once, at the end
 VAL_SEEDS = tuple(range(200, 204))  # held out as well, rendered alike: the model's decisions are made on these
 SPLITS: dict[str, tuple[int, ...]] = {"test": TEST_SEEDS, "val": VAL_SEEDS}
+HELD_OUT_BASELINE_M = 0.63  # frozen: the baseline protocol 1 derived for the test pairs (0.6279 m), now a constant
+# Per capture video, log-uniform: the held-out pairs at 0.63 m span about 19-51 px (1st-99th percentile)
+# and their mirrors fool stereo by 8-17 px; scenes at 0.35-1.0 m span about 10-83 px and 5-29 px.
+TRAIN_BASELINE_M = (0.35, 1.0)
+_BASELINE_STREAM = 0x62617365  # "base": the capture baselines' random numbers, apart from the scenes'
+GENERATED_MONO_SEED = 1_000_000  # + a generated video's seed: the estimator of its samples' mono input
 REGIONS = ("all", "picture", "mirror", "non_illusion")
 BASELINES = ("mono_gt_align", "sgbm")  # untrained: scored once per benchmark, not per seed
 TRAIN_OVERRIDES: dict[str, Any] = {"train.batch_size": 2, "train.crop": (160, 288), "train.val_every": 200,
                                    "train.checkpoint_every": 200}
 DEFAULT_STEPS = 1500
 SPLIT = "train=0.85,val=0.15"
+SPLIT_SEED = 0  # every benchmark seed trains on the train/val split this seed deals
+_SEED_SEARCH = 100_000  # launch seeds tried for one that deals SPLIT_SEED's split
+PREPARED = "prepared.json"  # in a workspace: the recipe it was prepared with and the conditions its data shows
 
 
 @dataclass(frozen=True)
@@ -81,103 +109,285 @@ class Network:
 
 FUSION = Network("fusion", {}, {"fusion": "fusion", "stereo": "stereo"})
 # --ablations, the paper's in miniature. no_vlm: the confidence from image features alone (the PF
-# ablation). stereo_only: the stereo branch alone (model.use_mono off: its context encoder is fed a
-# constant instead of the mono input, no confidence or fusion, RAFT-Stereo's sequence loss), trained
-# the same way on the same data; unlike the fusion network's stereo branch it never sees the mono input.
-ABLATIONS = (Network("no_vlm", {"model.use_vlm": False}, {"fusion_no_vlm": "fusion"}),
+# ablation), its own stereo branch scored too. stereo_only: the stereo branch alone (model.use_mono off:
+# its context encoder is fed a constant instead of the mono input, no confidence or fusion, RAFT-Stereo's
+# sequence loss), trained the same way on the same data; unlike the fusion networks' stereo branches it
+# never sees the mono input.
+ABLATIONS = (Network("no_vlm", {"model.use_vlm": False}, {"fusion_no_vlm": "fusion", "stereo_no_vlm": "stereo"}),
              Network("stereo_only", {"model.use_vlm": False, "model.use_mono": False}, {"stereo_only": "stereo"}))
 
 
 def run_fusion_bench(work_dir: Path, *, seeds: int = 1, steps: int = DEFAULT_STEPS, ablations: bool = False,
-                     split: str = "test", workers: int = 1) -> dict[str, Any]:
+                     split: str = "test", workers: int = 1, pretrained: Path | None = None) -> dict[str, Any]:
     """Prepare (or reuse) the data in ``work_dir``, train per seed the fusion network (and, with
-    ``ablations``, the no-VLM and stereo-only ones), ``workers`` trainings at a time, and score every
-    method on the held-out pairs of ``split`` (SPLITS). Returns per method and region the mean (and
-    spread over seeds) of EPE and bad-2, the disparity ranges of training and the pairs, and the
-    timings (seconds; a network's training time is its job's, from start to end)."""
+    ``ablations``, the no-VLM and stereo-only ones) — each fine-tuned from the trunk file ``pretrained``
+    when one is given —, ``workers`` trainings at a time, and score every method on the held-out pairs
+    of ``split`` (SPLITS). Returns per method and region the mean (and spread over seeds) of EPE and
+    bad-2, every seed's figures, fusion's paired differences against every other method, the
+    conditions (mirror fooling, aligned mono error) of training and of the pairs, the disparity ranges,
+    and the timings (seconds; a network's training time is its job's, from start to end)."""
     started = time.perf_counter()
-    rt, cached = prepared_workspace(work_dir / "workspace")
+    trunk = load_trunk(pretrained) if pretrained is not None else None
+    rt, cached, train_conditions = prepared_workspace(work_dir / "workspace")
     prepare_s = time.perf_counter() - started
     train_range = training_disparity_range(rt)
-    pairs, render_s, info = _held_out(train_range, split)
+    pairs, render_s, info = _held_out(split)
     networks = (FUSION, *ABLATIONS) if ablations else (FUSION,)
     timed = time.perf_counter()
     baselines = _score(pairs, build_methods(list(BASELINES), checkpoint=None, predictions=None, mono_dir=None))
     baselines_s = time.perf_counter() - timed
-    launched = {(seed, network.name): _launch(rt, seed, steps, network) for seed in range(seeds) for network in networks}
+    train_seeds = training_seeds(rt, seeds)
+    inits, init_report = _inits(rt, trunk, networks, train_seeds, steps)
+    launched = {(k, network.name): launch_run(rt, seed, network_overrides(network, steps), init=inits.get((k, network.name)))
+                for k, seed in enumerate(train_seeds) for network in networks}
     timed = time.perf_counter()
-    _run_jobs(rt, workers)
+    run_jobs(rt, workers)
     train_wall_s = time.perf_counter() - timed
-    runs = [_seed_scores(rt, seed, pairs, networks, launched) for seed in range(seeds)]
+    runs = [_seed_scores(rt, k, pairs, networks, launched) for k in range(seeds)]
     rt.close()
     return {
+        "protocol": PROTOCOL,
         "methods": {**_aggregate([r["methods"] for r in runs]), **_aggregate([baselines])},
-        "seeds": seeds, "steps": steps, "preset": "lite", "size": f"{SIZE[0]}x{SIZE[1]}", "workers": workers,
+        "paired": paired_differences([{**r["methods"], **baselines} for r in runs], "fusion"),
+        "per_seed": [{"seed": k, "train_seed": seed, "runs": runs[k]["runs"], "methods": _rounded(runs[k]["methods"])}
+                     for k, seed in enumerate(train_seeds)],
+        "seeds": seeds, "split_seed": SPLIT_SEED, "train_seeds": train_seeds, "steps": steps, "preset": "lite",
+        "size": f"{SIZE[0]}x{SIZE[1]}", "workers": workers,
         "networks": {n.name: {"overrides": dict(n.overrides), "methods": list(n.methods)} for n in networks},
+        "pretrained": None if trunk is None else {"file": trunk.name, "sha256": trunk.sha256, "recipe": trunk.recipe,
+                                                  "init": init_report},
+        "conditions": {"training": train_conditions, "held_out": condition_ranges(condition_values(pairs))},
         "train_disparity_px": train_range, "pairs": info, "prepare_cached": cached,
         "timings_s": {"prepare": round(prepare_s, 1), "render_pairs": round(render_s, 1),
                       "score_baselines": round(baselines_s, 1),
-                      "train": {n.name: [r["networks"][n.name]["train_s"] for r in runs] for n in networks},
+                      "train": {n.name: [r["train_s"][n.name] for r in runs] for n in networks},
                       "train_wall": round(train_wall_s, 1),
-                      "score": {n.name: [r["networks"][n.name]["score_s"] for r in runs] for n in networks},
+                      "score": {n.name: [r["score_s"][n.name] for r in runs] for n in networks},
                       "total": round(time.perf_counter() - started, 1)},
-        "runs": [{"seed": r["seed"], **{name: net["run"] for name, net in r["networks"].items()}} for r in runs],
     }
 
 
-def _held_out(train_range: list[float], split: str) -> tuple[list[StereoSample], float, dict[str, Any]]:
+def _inits(rt: Runtime, trunk: Trunk | None, networks: tuple[Network, ...], train_seeds: list[int],
+           steps: int) -> tuple[dict[tuple[int, str], Path], dict[str, Any]]:
+    """Per (seed index, network) the init checkpoint composed from ``trunk`` (none without one), and per
+    network what it loaded from the trunk and what started fresh (the same names for every seed)."""
+    paths: dict[tuple[int, str], Path] = {}
+    report: dict[str, Any] = {}
+    if trunk is None:
+        return paths, report
+    for network in networks:
+        config = load_preset("lite", network_overrides(network, steps))
+        for k, seed in enumerate(train_seeds):
+            path = rt.settings.home / "inits" / f"{network.name}-seed{seed}-{trunk.sha256[:12]}.pt"
+            report[network.name] = compose_init(trunk, config, seed, path)
+            paths[k, network.name] = path
+    return paths, report
+
+
+def _held_out(split: str) -> tuple[list[StereoSample], float, dict[str, Any]]:
     """The pairs of ``split``, the seconds rendering them took, and what describes them."""
     if split not in SPLITS:
         raise ValueError(f"unknown split {split!r}; choose {' or '.join(SPLITS)}")
     started = time.perf_counter()
-    pairs, baseline = test_samples(train_range, SPLITS[split])
+    pairs = held_out_samples(SPLITS[split])
     values = np.concatenate([s.disparity[np.isfinite(s.disparity)] for s in pairs])
     info = {"split": split, "seeds": list(SPLITS[split]), "samples": len(pairs), "disparity_px": _range(values),
-            "baseline_m": round(baseline, 4)}
+            "baseline_m": HELD_OUT_BASELINE_M, "sha256": pairs_digest(pairs)}
     return pairs, time.perf_counter() - started, info
 
 
-def prepared_workspace(home: Path) -> tuple[Runtime, bool]:
-    """The benchmark's workspace: every synthetic frame generated and accepted, and the rendered
-    captures imported and accepted. Built once; a later call finds ``prepared.json`` and reuses it."""
-    marker = home / "prepared.json"
-    recipe = {"size": SIZE, "frames": FRAMES, "generated": GENERATED_VIDEOS, "rendered": RENDERED_SEEDS,
-              "synthetic": SYNTHETIC_FORMAT}
-    cached = marker.is_file() and json.loads(marker.read_text()) == json.loads(json.dumps(recipe))
-    settings = init_workspace(home)
-    rt = Runtime(settings)
-    if cached:
-        return rt, True
+def held_out_samples(seeds: Iterable[int], frames: int = FRAMES) -> list[StereoSample]:
+    """The held-out rendered pairs: ``frames`` of each seed, at SIZE and HELD_OUT_BASELINE_M (see
+    :func:`video_samples`). Nothing of the training data enters them."""
+    return [sample for seed in seeds
+            for sample in video_samples(render_video(seed, frames, *SIZE, baseline_m=HELD_OUT_BASELINE_M))]
+
+
+def test_samples(_train_range: object, seeds: tuple[int, ...] = TEST_SEEDS,
+                 frames: int = FRAMES) -> tuple[list[StereoSample], float]:
+    """Protocol 1's call, kept for tests/test_synthetic_mono.py until it calls :func:`held_out_samples`:
+    the pairs and their baseline, which no longer depend on the training range."""
+    return held_out_samples(seeds, frames), HELD_OUT_BASELINE_M
+
+
+def video_samples(video: SyntheticVideo) -> list[StereoSample]:
+    """A rendered video's frames as samples: regions all / picture / mirror / non_illusion; mono = the
+    realistic monocular disparity; meta ``seed`` and ``mirror_fooling_px`` (frames with mirror pixels)."""
+    samples = []
+    for frame in video.frames:
+        masks = {pair.illusion_type: pair.illusion for pair in frame.regions}
+        illusion = np.logical_or.reduce(list(masks.values()))
+        mirror = masks.get("mirror", np.zeros(illusion.shape, bool))
+        # How far a matcher that finds the reflection is from the glass: what a mirror does to stereo.
+        fooling = {"mirror_fooling_px": float(np.mean(np.abs(frame.stereo_disparity[mirror] - frame.disparity[mirror])))
+                   } if mirror.any() else {}
+        samples.append(StereoSample(
+            name=f"{video.name}/{frame.index:04d}", left=frame.left, right=frame.right,
+            disparity=frame.disparity, regions=make_regions(frame.disparity, {**masks, "non_illusion": ~illusion}),
+            mono=frame.mono_disparity, meta={"seed": video.seed, **fooling}))
+    return samples
+
+
+def pairs_digest(samples: Iterable[StereoSample]) -> str:
+    """sha256 over every sample's name, images, ground truth and mono input: equal digests, identical pairs."""
+    digest = hashlib.sha256()
+    for sample in samples:
+        digest.update(sample.name.encode())
+        for array in (sample.left, sample.right, sample.disparity, sample.mono):
+            digest.update(np.ascontiguousarray(array).tobytes())
+    return digest.hexdigest()
+
+
+def capture_baseline(seed: int) -> float:
+    """The stereo baseline (m) capture video ``seed`` is rendered at: log-uniform over TRAIN_BASELINE_M."""
+    rng = np.random.default_rng([_BASELINE_STREAM, seed])
+    return float(np.exp(rng.uniform(*np.log(TRAIN_BASELINE_M))))
+
+
+def condition_values(samples: Iterable[StereoSample]) -> dict[str, list[float]]:
+    """Per sample, what the network meets: how far mirrors fool stereo (``mirror_fooling_px`` of the
+    samples that record it) and mono-gt-align's EPE on non-illusion pixels (the monocular input's
+    error once the affine is undone)."""
+    align = build_methods(["mono_gt_align"], checkpoint=None, predictions=None, mono_dir=None)["mono_gt_align"]
+    options = EvalOptions(regions=("non_illusion",))
+    values: dict[str, list[float]] = {"mirror_fooling_px": [], "aligned_mono_epe_px": []}
+    for sample in samples:
+        if "mirror_fooling_px" in sample.meta:
+            values["mirror_fooling_px"].append(float(sample.meta["mirror_fooling_px"]))
+        values["aligned_mono_epe_px"].append(sample_metrics(align(sample), sample, options)["non_illusion"]["epe"])
+    return values
+
+
+def condition_ranges(values: Mapping[str, list[float]]) -> dict[str, dict[str, float]]:
+    """Each list of :func:`condition_values` as its count (``frames``), min, median and max."""
+    return {key: {"frames": len(v), **({"min": round(min(v), 3), "median": round(statistics.median(v), 3),
+                                        "max": round(max(v), 3)} if v else {})}
+            for key, v in values.items()}
+
+
+def redrawn_mono(disparity: np.ndarray, source: np.ndarray, scale: float, masks: Mapping[str, np.ndarray],
+                 seed: int, index: int) -> np.ndarray:
+    """A generated sample's monocular input drawn independently of its ground truth: the realistic
+    estimator of ``dataset.synthetic.mono`` for video ``GENERATED_MONO_SEED + seed`` (another draw than
+    the one ``source``, the map its ground truth ``disparity`` was made from, came from), applied to
+    the sample's scene — ``disparity`` as the truth, ``scale``·``source`` (the depicted scene in
+    pictures, the partly reflected one in mirrors) as what a monocular network is fooled into. ``masks``:
+    the illusion masks by kind (picture, mirror). Frame ``index``'s affine is drawn too."""
+    shape = disparity.shape
+    picture, mirror = (np.asarray(masks.get(kind, np.zeros(shape, bool)), bool) for kind in ("picture", "mirror"))
+    model_seed = GENERATED_MONO_SEED + seed
+    mono, _affine = realistic_mono(sample_mono_model(model_seed), model_seed, index, _positive(disparity),
+                                   _positive(scale * np.asarray(source, np.float64)), picture, mirror)
+    return mono
+
+
+def _positive(disparity: np.ndarray) -> np.ndarray:
+    """The estimator's maps must be > 0 px: a plane fitted past the horizon is held at its smallest
+    positive disparity (it is far; the estimator blurs it anyway)."""
+    disparity = np.asarray(disparity, np.float64)
+    good = np.isfinite(disparity) & (disparity > 0)
+    return np.where(good, disparity, disparity[good].min())
+
+
+def redraw_generated_mono(session: Session, media: MediaStore) -> int:
+    """Replace the monocular input of every generated (not yet accepted) sample by :func:`redrawn_mono`;
+    the ground truth stays. Illusion kinds come from the synthetic video's own pairs. Returns the count."""
+    samples = session.scalars(select(Sample).where(Sample.state == SampleState.generated).order_by(Sample.id)).all()
+    for sample in samples:
+        frame = session.get(Frame, sample.frame_id)
+        video = session.get(Video, frame.video_id)
+        kinds = {mask_name("illusion", pair["pair"]): pair["kind"] for pair in video.meta["pairs"]}
+        masks = {kinds[name]: load_output(media, key, "mask") for name, key in sample.files["masks"].items()
+                 if name in kinds}
+        mono = redrawn_mono(load_output(media, sample.files["disparity"], "disparity"),
+                            load_output(media, sample.files["disparity_mono"], "disparity_mono"),
+                            float(sample.params["scale"]), masks, int(video.meta["seed"]), frame.index)
+        sample.files = {**sample.files, **store_outputs(media, {"disparity_mono": mono})}
+        sample.provenance = {**sample.provenance, "mono_input": f"independent draw: dataset.synthetic.mono estimator "
+                                                                f"{GENERATED_MONO_SEED + int(video.meta['seed'])}"}
+    return len(samples)
+
+
+def bench_workspace(home: Path, recipe: Mapping[str, Any]) -> tuple[Runtime, dict[str, Any] | None]:
+    """The workspace in ``home`` and, when it was prepared with ``recipe``, the conditions stored with it
+    (None: still to prepare). A workspace prepared with another recipe, or whose preparation did not
+    finish, is refused rather than added to: its data would mix with the recipe's."""
+    marker = home / PREPARED
+    stored = json.loads(marker.read_text()) if marker.is_file() else None
+    if stored is not None and stored.get("recipe") != json.loads(json.dumps(recipe)):
+        was = (stored.get("recipe") or {}).get("protocol", 1)
+        raise RuntimeError(f"{home} was prepared with another recipe (protocol {was}, now {recipe.get('protocol')}): "
+                           "remove it, or pass another --work-dir")
+    if stored is None and home.is_dir() and any(home.iterdir()):
+        raise RuntimeError(f"{home} holds an unfinished preparation: remove it, or pass another --work-dir")
+    rt = Runtime(init_workspace(home))
+    if stored is not None:
+        return rt, stored["conditions"]
     with transaction(rt.sessions) as s:
-        users = {role: s.scalar(select(User).where(User.name == f"bench-{role.value}"))
-                 or user_service.create_user(s, f"bench-{role.value}", role, f"bench-{role.value}-password")
-                 for role in Role}
-        user_ids = {role: u.id for role, u in users.items()}
+        for role in Role:
+            if s.scalar(select(User).where(User.name == f"bench-{role.value}")) is None:
+                user_service.create_user(s, f"bench-{role.value}", role, f"bench-{role.value}-password")
+    return rt, None
+
+
+def finish_workspace(home: Path, recipe: Mapping[str, Any], conditions: dict[str, Any]) -> dict[str, Any]:
+    """Mark the workspace in ``home`` prepared with ``recipe``; returns ``conditions``, stored beside it."""
+    (home / PREPARED).write_text(json.dumps({"recipe": recipe, "conditions": conditions}))
+    return conditions
+
+
+def prepared_workspace(home: Path) -> tuple[Runtime, bool, dict[str, Any]]:
+    """The benchmark's workspace: every synthetic frame generated (its mono input redrawn) and accepted,
+    and the rendered captures imported and accepted; whether it was cached, and the conditions its
+    generated samples and captures show (:func:`condition_ranges`). Built once."""
+    recipe = {"protocol": PROTOCOL, "size": SIZE, "frames": FRAMES, "generated": GENERATED_VIDEOS,
+              "rendered": RENDERED_SEEDS, "synthetic": SYNTHETIC_FORMAT, "capture_baselines_m": TRAIN_BASELINE_M,
+              "generated_mono_seed": GENERATED_MONO_SEED}
+    rt, conditions = bench_workspace(home, recipe)
+    if conditions is not None:
+        return rt, True, conditions
     videos = write_synthetic_dataset(home / "synthetic", videos=GENERATED_VIDEOS, seed=0, n_frames=FRAMES,
                                      width=SIZE[0], height=SIZE[1])
     with transaction(rt.sessions) as s:
         for path in videos:
             rt.submit(s, "ingest", ingest_params(str(path), dedup_hamming=None, prefilter=True), None)
-    _run_jobs(rt)
+    run_jobs(rt)
     with transaction(rt.sessions) as s:
-        curator, annotator = s.get(User, user_ids[Role.curator]), s.get(User, user_ids[Role.annotator])
+        curator, annotator = (s.scalar(select(User).where(User.name == f"bench-{role}")) for role in ("curator", "annotator"))
         # Every frame joins, whatever the prefilter said: the benchmark measures the model, not the filter.
         for frame_id in s.scalars(select(Frame.id).where(Frame.state.in_((FrameState.prefiltered, FrameState.rejected)))):
             review_frame(s, frame_id, curator, "approve")
         for frame_id in seed_reviews_and_annotations(s, rt.media, curator, annotator, approve=FRAMES, annotate=FRAMES):
             rt.submit(s, "generate", {"frame_id": frame_id}, annotator)
-    _run_jobs(rt)
+    run_jobs(rt)
     with transaction(rt.sessions) as s:
-        curator = s.get(User, user_ids[Role.curator])
-        accept_generated_samples(s, curator)
-        for seed in RENDERED_SEEDS:
-            for sample_id in import_rendered_video(s, rt.media, render_video(seed, FRAMES, *SIZE)):
+        redraw_generated_mono(s, rt.media)
+        accept_generated_samples(s, s.scalar(select(User).where(User.name == "bench-curator")))
+    with rt.sessions() as s:
+        generated = pin_dataset_version(s, rt.media, kinds=["synthesized"])
+    reader = VersionReader(generated, rt.settings.media_root)
+    conditions = {"generated": condition_ranges(condition_values(reader[i] for i in range(len(reader)))),
+                  "captures": import_captures(rt, RENDERED_SEEDS, FRAMES)}
+    return rt, False, finish_workspace(home, recipe, conditions)
+
+
+def import_captures(rt: Runtime, seeds: Iterable[int], frames: int) -> dict[str, Any]:
+    """Render ``frames`` frames of each seed at its :func:`capture_baseline`, import them as captures and
+    accept them (one transaction per video); the conditions they show (:func:`condition_ranges`)."""
+    values: dict[str, list[float]] = {"mirror_fooling_px": [], "aligned_mono_epe_px": []}
+    for seed in seeds:
+        video = render_video(seed, frames, *SIZE, baseline_m=capture_baseline(seed))
+        with transaction(rt.sessions) as s:
+            curator = s.scalar(select(User).where(User.name == "bench-curator"))
+            for sample_id in import_rendered_video(s, rt.media, video):
                 review_sample(s, sample_id, curator, "accept")
-    marker.write_text(json.dumps(recipe))
-    return rt, False
+        for key, found in condition_values(video_samples(video)).items():
+            values[key] += found
+    return condition_ranges(values)
 
 
-def _run_jobs(rt: Runtime, workers: int = 1) -> None:
+def run_jobs(rt: Runtime, workers: int = 1) -> None:
+    """Every queued job of the workspace, ``workers`` at a time; RuntimeError naming those that failed."""
     ran = job_service.run_queued_jobs(HANDLERS, rt, workers=workers)
     failed = [job_id for job_id, state in ran if state != JobState.succeeded]
     if failed:
@@ -197,39 +407,41 @@ def _range(values: np.ndarray) -> list[float]:
     return [round(float(np.percentile(values, 1)), 2), round(float(np.percentile(values, 99)), 2)]
 
 
-def test_samples(train_range: list[float], seeds: tuple[int, ...] = TEST_SEEDS,
-                 frames: int = FRAMES) -> tuple[list[StereoSample], float]:
-    """The held-out rendered pairs (``frames`` of each seed, at SIZE), at a baseline putting their
-    first seed's 99th percentile disparity at the training one's; regions all / picture / mirror /
-    non_illusion; mono = the realistic monocular disparity."""
-    probe = render_video(seeds[0], 1, *SIZE)
-    baseline = BASELINE_M * train_range[1] / float(np.percentile(probe.frames[0].disparity, 99))
-    samples = []
-    for seed in seeds:
-        video = render_video(seed, frames, *SIZE, baseline_m=baseline)
-        for frame in video.frames:
-            masks = {pair.illusion_type: pair.illusion for pair in frame.regions}
-            illusion = np.logical_or.reduce(list(masks.values()))
-            samples.append(StereoSample(
-                name=f"{video.name}/{frame.index:04d}", left=frame.left, right=frame.right,
-                disparity=frame.disparity, regions=make_regions(frame.disparity, {**masks, "non_illusion": ~illusion}),
-                mono=frame.mono_disparity, meta={"seed": seed}))
-    return samples, baseline
+def training_seeds(rt: Runtime, count: int) -> list[int]:
+    """The launch seeds of the benchmark's ``count`` seeds over the workspace's accepted samples (what
+    a run with the default selection pins): :func:`split_keeping_seeds`."""
+    with rt.sessions() as s:
+        version = training.pin_selection(s, rt.media, training.DataSelection())
+    return split_keeping_seeds(version, count)
 
 
-def run_mono_bench(work_dir: Path, *, split: str = "test") -> dict[str, Any]:
+def split_keeping_seeds(version: Mapping[str, Any], count: int) -> list[int]:
+    """The first ``count`` launch seeds, from SPLIT_SEED on, that split ``version`` into SPLIT's train and
+    validation videos exactly as SPLIT_SEED does. A launch's seed seeds both its split and its training
+    (``webapp.jobs.runs.launch``), so training with these keeps the split fixed over the benchmark's
+    seeds: each changes the initialisation, the order and the augmentation only."""
+    fractions = training.parse_split(SPLIT)
+    reference = training.split_version(dict(version), fractions, SPLIT_SEED)
+    found: list[int] = []
+    for seed in range(SPLIT_SEED, SPLIT_SEED + _SEED_SEARCH):
+        if training.split_version(dict(version), fractions, seed) == reference:
+            found.append(seed)
+            if len(found) == count:
+                return found
+    raise RuntimeError(f"benchmark: only {len(found)} of {_SEED_SEARCH} launch seeds split the data as seed "
+                       f"{SPLIT_SEED} does; fewer seeds, or fewer videos, would do")
+
+
+def run_mono_bench(*, split: str = "test") -> dict[str, Any]:
     """mono-gt-align on the held-out pairs of ``split``, no training: EPE and bad-2 per region, the
-    non-illusion bad-2 (the monocular model's calibration figure) on top. Prepares (or reuses) the
-    workspace in ``work_dir`` for the training disparity range that fixes the pairs' baseline."""
+    non-illusion bad-2 (the monocular model's calibration figure) on top, and the pairs' conditions."""
     started = time.perf_counter()
-    rt, cached = prepared_workspace(work_dir / "workspace")
-    train_range = training_disparity_range(rt)
-    rt.close()
-    pairs, _render_s, info = _held_out(train_range, split)
+    pairs, _render_s, info = _held_out(split)
     figures = mono_figures(pairs)
     return {"non_illusion_bad2": figures["non_illusion"]["bad2"], "methods": {"mono_gt_align": figures},
-            "size": f"{SIZE[0]}x{SIZE[1]}", "train_disparity_px": train_range, "pairs": info,
-            "prepare_cached": cached, "seconds": round(time.perf_counter() - started, 1)}
+            "size": f"{SIZE[0]}x{SIZE[1]}", "pairs": info,
+            "conditions": {"held_out": condition_ranges(condition_values(pairs))},
+            "seconds": round(time.perf_counter() - started, 1)}
 
 
 def mono_figures(samples: list[StereoSample]) -> dict[str, dict[str, float]]:
@@ -238,22 +450,24 @@ def mono_figures(samples: list[StereoSample]) -> dict[str, dict[str, float]]:
     return {r: {k: round(v, 3) for k, v in f.items()} for r, f in figures["mono_gt_align"].items()}
 
 
-def _seed_scores(rt: Runtime, seed: int, pairs: list[StereoSample], networks: tuple[Network, ...],
+def _seed_scores(rt: Runtime, k: int, pairs: list[StereoSample], networks: tuple[Network, ...],
                  launched: Mapping[tuple[int, str], int]) -> dict[str, Any]:
-    """Each of ``networks``, trained with ``seed`` (its run id in ``launched``), scored on ``pairs``: their
+    """Each of ``networks`` of benchmark seed ``k`` (its run id in ``launched``) scored on ``pairs``: their
     figures by report key, and per network its run id and the seconds its training and its scoring took."""
     figures: dict[str, Any] = {}
-    timings: dict[str, dict[str, Any]] = {}
+    runs: dict[str, int] = {}
+    train_s: dict[str, float] = {}
+    score_s: dict[str, float] = {}
     for network in networks:
-        run_id = launched[seed, network.name]
-        checkpoint, train_s = _trained(rt, run_id)
+        run_id = launched[k, network.name]
+        checkpoint, seconds = trained_checkpoint(rt, run_id)
         started = time.perf_counter()
         built = build_methods(sorted(set(network.methods.values())), checkpoint=checkpoint, predictions=None,
                               mono_dir=None)
         figures.update(_score(pairs, {key: built[method] for key, method in network.methods.items()}))
-        timings[network.name] = {"run": run_id, "train_s": round(train_s, 1),
-                                 "score_s": round(time.perf_counter() - started, 1)}
-    return {"seed": seed, "methods": figures, "networks": timings}
+        runs[network.name], train_s[network.name] = run_id, round(seconds, 1)
+        score_s[network.name] = round(time.perf_counter() - started, 1)
+    return {"methods": figures, "runs": runs, "train_s": train_s, "score_s": score_s}
 
 
 def network_overrides(network: Network, steps: int) -> dict[str, Any]:
@@ -261,17 +475,22 @@ def network_overrides(network: Network, steps: int) -> dict[str, Any]:
     return {**TRAIN_OVERRIDES, "train.steps": steps, **network.overrides}
 
 
-def _launch(rt: Runtime, seed: int, steps: int, network: Network) -> int:
-    """Queue ``network``'s training with ``seed`` through the product's training job: its run id."""
+def launch_run(rt: Runtime, seed: int, overrides: Mapping[str, Any], *, split: str = SPLIT,
+               init: Path | None = None) -> int:
+    """Queue a ``lite`` training with ``overrides`` and launch ``seed`` over every accepted sample, split by
+    video in the shares of ``split``, starting from the checkpoint ``init`` if given, through the
+    product's training job: its run id."""
     with transaction(rt.sessions) as s:
         admin = s.scalar(select(User).where(User.name == "bench-admin"))
         run = run_control.launch(
-            rt, s, preset="lite", overrides=network_overrides(network, steps), selection=training.DataSelection(),
-            launch=training.Launch(split=training.parse_split(SPLIT), seed=seed), user=admin)
+            rt, s, preset="lite", overrides=dict(overrides), selection=training.DataSelection(),
+            launch=training.Launch(split=training.parse_split(split), seed=seed,
+                                   init_checkpoint=None if init is None else str(init),
+                                   init_label=None if init is None else init.name), user=admin)
         return run.id
 
 
-def _trained(rt: Runtime, run_id: int) -> tuple[Path, float]:
+def trained_checkpoint(rt: Runtime, run_id: int) -> tuple[Path, float]:
     """A finished run's best checkpoint and the seconds its training job ran."""
     with rt.sessions() as s:
         job = s.get(Job, s.get(TrainingRun, run_id).job_id)
@@ -288,6 +507,10 @@ def _score(pairs: list[StereoSample], methods: dict[str, Predict]) -> dict[str, 
             for m, d in report["methods"].items()}
 
 
+def _rounded(figures: dict[str, Any]) -> dict[str, Any]:
+    return {m: {r: {k: round(v, 3) for k, v in f.items()} for r, f in regions.items()} for m, regions in figures.items()}
+
+
 def _aggregate(per_seed: list[dict[str, Any]]) -> dict[str, Any]:
     """Mean over seeds of each figure, with the spread (population standard deviation) beside it."""
     out: dict[str, Any] = {}
@@ -301,3 +524,18 @@ def _aggregate(per_seed: list[dict[str, Any]]) -> dict[str, Any]:
                 if len(values) > 1:
                     out[method][region][f"{key}_spread"] = round(statistics.pstdev(values), 3)
     return out
+
+
+def paired_differences(per_seed: list[dict[str, Any]], reference: str) -> dict[str, Any]:
+    """Per method other than ``reference``: ``reference`` minus it, seed by seed, per region and figure,
+    as the mean and spread over seeds (:func:`_aggregate`; < 0: ``reference`` is better) and in how
+    many seeds ``reference`` was lower (``<figure>_lower``)."""
+    others = [m for m in per_seed[0] if m != reference]
+    differences = [{m: {r: {k: run[reference][r][k] - run[m][r][k] for k in figures} for r, figures in run[reference].items()}
+                    for m in others} for run in per_seed]
+    out = _aggregate(differences)
+    for method, regions in out.items():
+        for region, figures in regions.items():
+            for key in list(per_seed[0][reference][region]):
+                figures[f"{key}_lower"] = sum(run[method][region][key] < 0 for run in differences)
+    return {"reference": reference, "seeds": len(per_seed), "against": out}

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import click
 
 from dataset.geometry.benchmark import run_geometry_benchmark
+from dataset.readers import READER_FORMATS, LayoutError
 from dataset.settings import drop_settings_environment
 
 # The budgets of DESIGN.md for this class of 2-core machine (ms).
@@ -57,11 +59,23 @@ def click_benchmark(as_json: bool, clicks: int, no_sam2: bool) -> None:
 
 @bench.command("proposals")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
-def proposals_benchmark(as_json: bool) -> None:
-    """Illusion proposers on held-out synthetic videos: recall, precision, IoU, ms, and clicks saved."""
-    from webapp.benchmarks.proposals import run_proposals_bench
+@click.option("--real", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              help="A folder of real pairs with ground truth: pictures are composited into each, beside the Motorcycle's.")
+@click.option("--format", "fmt", type=click.Choice(READER_FORMATS), help="The layout of --real.")
+@click.option("--threshold", type=click.FloatRange(0, 1), default=None,
+              help="Score below which a proposal does not count (default: plane-break's DEFAULT_THRESHOLD).")
+def proposals_benchmark(as_json: bool, real: Path | None, fmt: str | None, threshold: float | None) -> None:
+    """Illusion proposers on held-out synthetic videos and on real scenes with composited pictures: recall,
+    precision, false proposals on untouched frames, a threshold sweep, IoU, ms, and clicks saved."""
+    from webapp.benchmarks.proposals import report_lines, run_proposals_bench
 
-    _report(run_proposals_bench(), as_json)
+    if real is not None and fmt is None:
+        raise click.UsageError("--real needs --format (the layout of its pairs)")
+    try:
+        results = run_proposals_bench(real=real, real_format=fmt, **({} if threshold is None else {"threshold": threshold}))
+    except LayoutError as exc:
+        raise click.BadParameter(str(exc), param_hint="--real") from None
+    click.echo(json.dumps(results) if as_json else "\n".join(report_lines(results)))
 
 
 @bench.command("generate")
@@ -165,10 +179,11 @@ def model_benchmark(as_json: bool, repeats: int, train_steps: int) -> None:
 @bench.command("fusion")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("--seeds", type=click.IntRange(min=1), default=1, show_default=True,
-              help="Training runs with seeds 0..N-1; figures are their mean and spread.")
+              help="Training runs per network, all on the same train/val split; figures are their mean and spread, "
+                   "and fusion's differences paired by seed.")
 @click.option("--steps", type=click.IntRange(min=1), default=None, help="Training steps per run (default: the benchmark's).")
 @click.option("--work-dir", type=click.Path(file_okay=False, path_type=Path), default=Path("var/bench-fusion"),
-              show_default=True, help="Where the prepared data is cached between runs.")
+              show_default=True, help="Where the prepared data (and the pre-trained trunk) is cached between runs.")
 @click.option("--mono-only", is_flag=True,
               help="No training: score mono-gt-align alone on the held-out pairs (the monocular input's calibration).")
 @click.option("--ablations", is_flag=True,
@@ -177,21 +192,116 @@ def model_benchmark(as_json: bool, repeats: int, train_steps: int) -> None:
               help="The held-out pairs scored: val (seeds of its own) to decide on, test once, at the end.")
 @click.option("--workers", type=click.IntRange(1, 64), default=1, show_default=True,
               help="Trainings run side by side (each one process; give each a core: OMP_NUM_THREADS=1 on 2 cores).")
+@click.option("--pretrained", type=click.Path(dir_okay=False, exists=True, path_type=Path), default=None,
+              help="Fine-tune every network from this trunk (`bench pretrain`'s trunk.safetensors, trunk.json beside "
+                   "it). Default: WORK_DIR/pretrain/trunk.safetensors when it exists.")
+@click.option("--scratch", is_flag=True, help="Train from scratch even when WORK_DIR holds a pre-trained trunk.")
 def fusion_benchmark(as_json: bool, seeds: int, steps: int | None, work_dir: Path, mono_only: bool,
-                     ablations: bool, split: str, workers: int) -> None:
-    """The synthetic illusion benchmark: train lite on the product's own samples and rendered captures,
-    score fusion, stereo, mono-gt-align and sgbm (with --ablations also fusion_no_vlm and stereo_only)
-    on held-out rendered pairs (all, picture, mirror, non-illusion)."""
+                     ablations: bool, split: str, workers: int, pretrained: Path | None, scratch: bool) -> None:
+    """The synthetic illusion benchmark: train lite on the product's own samples and rendered captures
+    (fine-tuned from the pre-trained trunk when there is one), score fusion, stereo, mono-gt-align and
+    sgbm (with --ablations also the no-VLM network's fusion and stereo branch, and stereo_only) on frozen
+    held-out rendered pairs (all, picture, mirror, non-illusion)."""
     from webapp.benchmarks.fusion import DEFAULT_STEPS, run_fusion_bench, run_mono_bench
+    from webapp.benchmarks.trunk import TRUNK_FILE
 
     if mono_only:
-        if ablations or workers > 1:
-            raise click.UsageError("--ablations and --workers are about training, and --mono-only trains nothing: "
-                                   "pass one or the other")
-        _report(run_mono_bench(work_dir.absolute(), split=split), as_json)
+        if ablations or workers > 1 or pretrained or scratch:
+            raise click.UsageError("--ablations, --workers, --pretrained and --scratch are about training, and "
+                                   "--mono-only trains nothing: pass one or the other")
+        _report(run_mono_bench(split=split), as_json)
         return
-    _report(run_fusion_bench(work_dir.absolute(), seeds=seeds, steps=steps or DEFAULT_STEPS, ablations=ablations,
-                             split=split, workers=workers), as_json)
+    if pretrained and scratch:
+        raise click.UsageError("--pretrained names a trunk to start from and --scratch starts from none: pass one")
+    work_dir = work_dir.absolute()
+    found = work_dir / TRUNK_FILE
+    trunk = None if scratch else pretrained or (found if found.is_file() else None)
+    results = run_fusion_bench(work_dir, seeds=seeds, steps=steps or DEFAULT_STEPS, ablations=ablations,
+                               split=split, workers=workers, pretrained=trunk)
+    if as_json:
+        click.echo(json.dumps(results))
+        return
+    _print_fusion(results)
+
+
+@bench.command("pretrain")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+@click.option("--work-dir", type=click.Path(file_okay=False, path_type=Path), default=Path("var/bench-fusion"),
+              show_default=True, help="`bench fusion`'s work dir: the trunk goes to WORK_DIR/pretrain/trunk.safetensors.")
+@click.option("--videos", type=click.IntRange(min=2, max=50_000), default=None,
+              help="Rendered scenes (seeds 10000 on), default the benchmark's.")
+@click.option("--frames", type=click.IntRange(min=1, max=100), default=None, help="Frames per scene.")
+@click.option("--steps", type=click.IntRange(min=1), default=None, help="Training steps.")
+def pretrain_benchmark(as_json: bool, work_dir: Path, videos: int | None, frames: int | None, steps: int | None) -> None:
+    """Pre-train lite's trunk (mono context encoder and stereo branch) on many rendered scenes with exact
+    disparity, never the benchmark's seeds, through the product's training job; `bench fusion` then
+    fine-tunes every network from it."""
+    from webapp.benchmarks.pretrain import PRETRAIN_FRAMES, PRETRAIN_STEPS, PRETRAIN_VIDEOS, run_pretrain
+
+    results = run_pretrain(work_dir.absolute(), videos=videos or PRETRAIN_VIDEOS, frames=frames or PRETRAIN_FRAMES,
+                           steps=steps or PRETRAIN_STEPS)
+    if as_json:
+        click.echo(json.dumps(results))
+        return
+    trunk = results["trunk"]
+    click.echo(f"trunk: {work_dir / trunk['file']} ({trunk['tensors']} tensors, {trunk['parameters']} parameters, "
+               f"{trunk['bytes']} bytes), sha256 {trunk['sha256']}; recipe in trunk.json")
+    click.echo(f"  run {trunk['recipe']['run']}, best step {trunk['recipe']['best_step']}, "
+               f"seeds {trunk['recipe']['data']['seeds'][0]}..{trunk['recipe']['data']['seeds'][1]}")
+    _print_conditions({"pre-training captures": results["conditions"]["training"]["captures"],
+                       "test pairs": results["conditions"]["held_out"]})
+    click.echo(f"timings_s {results['timings_s']}")
+
+
+def _print_fusion(results: dict[str, Any]) -> None:
+    """The fusion benchmark for people: the pairs, the conditions, every method's figures, fusion's paired
+    differences, the trunk it started from and the timings."""
+    pairs = results["pairs"]
+    click.echo(f"held-out pairs: {pairs['split']}, seeds {pairs['seeds'][0]}-{pairs['seeds'][-1]}, {pairs['samples']} pairs "
+               f"at {pairs['baseline_m']} m, disparity {pairs['disparity_px'][0]}-{pairs['disparity_px'][1]} px "
+               f"(training {results['train_disparity_px'][0]}-{results['train_disparity_px'][1]}), "
+               f"sha256 {pairs['sha256'][:16]}")
+    training = results["conditions"]["training"]
+    _print_conditions({"training captures": training["captures"], "training generated": training["generated"],
+                       f"{pairs['split']} pairs": results["conditions"]["held_out"]})
+    seeds = results["seeds"]
+    click.echo(f"EPE px / bad-2 %, mean{' ± spread' if seeds > 1 else ''} over {seeds} seed(s) "
+               f"(launch seeds {results['train_seeds']}, split of seed {results['split_seed']})")
+    regions = list(next(iter(results["methods"].values())))
+    click.echo(f"  {'method':16}" + "".join(f"  {r:>30}" for r in regions))
+    for method, figures in results["methods"].items():
+        click.echo(f"  {method:16}" + "".join(f"  {_figure(figures[r], 'epe') + ' / ' + _figure(figures[r], 'bad2'):>30}"
+                                             for r in regions))
+    paired = results["paired"]
+    for key, unit in (("epe", "EPE px"), ("bad2", "bad-2 %")):
+        click.echo(f"{unit}, {paired['reference']} minus each method, paired by seed (< 0: {paired['reference']} better; "
+                   f"[k]: lower in k of {paired['seeds']} seeds)")
+        for method, figures in paired["against"].items():
+            click.echo(f"  {method:16}" + "".join(
+                f"  {_figure(figures[r], key, signed=True) + ' [' + str(figures[r][key + '_lower']) + ']':>30}" for r in regions))
+    trunk = results["pretrained"]
+    if trunk is None:
+        click.echo("pretrained: none (from scratch)")
+    else:
+        fresh = {name: len(init["fresh"]) for name, init in trunk["init"].items()}
+        click.echo(f"pretrained: {trunk['file']} sha256 {trunk['sha256'][:16]}; tensors started fresh: {fresh}")
+    click.echo(f"timings_s {results['timings_s']}")
+
+
+def _figure(figures: dict[str, float], key: str, *, signed: bool = False) -> str:
+    value = f"{figures[key]:+.2f}" if signed else f"{figures[key]:.2f}"
+    spread = figures.get(f"{key}_spread")
+    return value if spread is None else f"{value} ± {spread:.2f}"
+
+
+def _print_conditions(groups: dict[str, dict[str, Any]]) -> None:
+    """Per group of frames the ranges (min / median / max over frames) of the mirror fooling and the
+    aligned mono's error: what training shows beside what the test meets."""
+    click.echo(f"  {'conditions (min / median / max)':32}  {'mirror fooling px':>32}  {'aligned mono EPE px':>32}")
+    for group, ranges in groups.items():
+        cells = [f"{r['frames']} frames: {r['min']:.2f} / {r['median']:.2f} / {r['max']:.2f}" if r["frames"] else "none"
+                 for r in (ranges["mirror_fooling_px"], ranges["aligned_mono_epe_px"])]
+        click.echo(f"  {group:32}" + "".join(f"  {cell:>32}" for cell in cells))
 
 
 def _report(results: dict[str, object], as_json: bool) -> None:

@@ -1,0 +1,272 @@
+"""The fusion benchmark's protocol 2 (issue 30): frozen held-out pairs, a split fixed across seeds, the
+paired record, the training data's conditions (capture baselines, an independent mono input), the
+pre-training seeds, and the pre-trained trunk that every network is fine-tuned from."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+torch = pytest.importorskip("torch")
+
+from dataset.services import training  # noqa: E402
+from dataset.synthetic import render_video  # noqa: E402
+from model.align import align  # noqa: E402
+from model.checkpoint import load_network, save_checkpoint  # noqa: E402
+from model.jobs import resolve_config  # noqa: E402
+from model.network import FusionNetwork  # noqa: E402
+from model.presets import Config, load_preset  # noqa: E402
+from webapp.benchmarks import fusion, pretrain  # noqa: E402
+from webapp.benchmarks.trunk import TRUNK_PREFIXES, compose_init, load_trunk, save_trunk  # noqa: E402
+from webapp.cli import main  # noqa: E402
+
+NETWORKS = (fusion.FUSION, *fusion.ABLATIONS)
+
+
+class _Workspace:
+    def __init__(self, home: Path) -> None:
+        self.settings = type("Settings", (), {"home": home})()
+
+    def close(self) -> None:
+        pass
+
+
+def test_held_out_pairs_are_bit_identical_whatever_the_training_workspace_holds(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two workspaces with other training data (disparity range, conditions): the same pairs, scored
+    alike, at the frozen baseline; their hash is the one of the pairs rendered on their own."""
+    scored: list[str] = []
+    score = fusion._score
+
+    def recording(pairs: list[Any], methods: dict[str, Any]) -> Any:
+        scored.append(fusion.pairs_digest(pairs))
+        return score(pairs, methods)
+
+    def trained(_rt: Any, k: int, _pairs: Any, _networks: Any, _launched: Any) -> dict[str, Any]:
+        figures = {"fusion": {r: {"epe": 1.0 + k, "bad2": 10.0} for r in fusion.REGIONS}}
+        return {"methods": figures, "runs": {"fusion": k + 1}, "train_s": {"fusion": 1.0}, "score_s": {"fusion": 1.0}}
+
+    one_frame = fusion.held_out_samples
+    monkeypatch.setattr(fusion, "held_out_samples", lambda seeds: one_frame(seeds[:2], frames=1))
+    monkeypatch.setattr(fusion, "training_seeds", lambda _rt, count: list(range(count)))
+    monkeypatch.setattr(fusion, "launch_run", lambda *_a, **_k: 1)
+    monkeypatch.setattr(fusion, "run_jobs", lambda _rt, workers: None)
+    monkeypatch.setattr(fusion, "_score", recording)
+    monkeypatch.setattr(fusion, "_seed_scores", trained)
+    reports = []
+    for train_range, fooling in (([3.0, 44.0], 2.1), ([10.0, 90.0], 30.0)):
+        conditions = {"mirror_fooling_px": {"frames": 1, "min": fooling, "median": fooling, "max": fooling}}
+        monkeypatch.setattr(fusion, "prepared_workspace", lambda home, c=conditions: (_Workspace(home), True, {"captures": c}))
+        monkeypatch.setattr(fusion, "training_disparity_range", lambda _rt, r=train_range: r)
+        reports.append(fusion.run_fusion_bench(tmp_path, seeds=2, steps=5, split="test"))
+    expected = fusion.pairs_digest(one_frame(fusion.TEST_SEEDS[:2], frames=1))
+    assert scored == [expected, expected]
+    assert [r["pairs"]["sha256"] for r in reports] == [expected, expected]
+    assert reports[0]["pairs"] == reports[1]["pairs"] and reports[0]["pairs"]["baseline_m"] == 0.63
+    assert reports[0]["conditions"]["held_out"] == reports[1]["conditions"]["held_out"]
+    assert reports[0]["train_disparity_px"] != reports[1]["train_disparity_px"]
+    assert reports[0]["paired"]["against"]["sgbm"]["all"]["epe_spread"] == pytest.approx(0.5)
+
+
+def _version(videos: int) -> dict[str, Any]:
+    """A pinned version's shape: 3 samples of each of ``videos`` videos."""
+    items = [{"sample_id": 3 * v + i, "video_id": v + 1, "scene_group": v + 1} for v in range(videos) for i in range(3)]
+    return {"id": "v", "items": items}
+
+
+def test_every_benchmark_seed_trains_on_the_same_split(monkeypatch: pytest.MonkeyPatch) -> None:
+    version = _version(12)  # the benchmark's 6 generated videos and 6 captures
+    seeds = fusion.split_keeping_seeds(version, 3)
+    fractions = training.parse_split(fusion.SPLIT)
+    splits = [training.split_version(version, fractions, seed) for seed in seeds]
+    assert seeds[0] == fusion.SPLIT_SEED and len(set(seeds)) == 3 and splits[0] == splits[1] == splits[2]
+    skipped = [seed for seed in range(seeds[0], seeds[-1]) if seed not in seeds]
+    assert skipped and all(training.split_version(version, fractions, seed) != splits[0] for seed in skipped)
+    monkeypatch.setattr(fusion, "_SEED_SEARCH", 200)
+    with pytest.raises(RuntimeError, match="split the data"):
+        fusion.split_keeping_seeds(_version(60), 2)  # one seed in C(60, 9) deals the same validation videos
+
+
+def test_paired_differences_of_synthetic_seeds() -> None:
+    per_seed = [
+        {"fusion": {"all": {"epe": 1.0, "bad2": 10.0}}, "no_vlm": {"all": {"epe": 1.5, "bad2": 8.0}},
+         "sgbm": {"all": {"epe": 3.0, "bad2": 20.0}}},
+        {"fusion": {"all": {"epe": 2.0, "bad2": 14.0}}, "no_vlm": {"all": {"epe": 1.5, "bad2": 10.0}},
+         "sgbm": {"all": {"epe": 3.0, "bad2": 20.0}}},
+        {"fusion": {"all": {"epe": 1.5, "bad2": 12.0}}, "no_vlm": {"all": {"epe": 2.5, "bad2": 9.0}},
+         "sgbm": {"all": {"epe": 3.0, "bad2": 20.0}}},
+    ]
+    paired = fusion.paired_differences(per_seed, "fusion")
+    assert paired["reference"] == "fusion" and paired["seeds"] == 3
+    # fusion - no_vlm: epe -0.5, +0.5, -1.0; bad2 +2, +4, +3
+    assert paired["against"]["no_vlm"]["all"] == {
+        "epe": pytest.approx(-0.333, abs=1e-3), "epe_spread": pytest.approx(0.624, abs=1e-3), "epe_lower": 2,
+        "bad2": 3.0, "bad2_spread": pytest.approx(0.816, abs=1e-3), "bad2_lower": 0}
+    assert paired["against"]["sgbm"]["all"]["epe"] == -1.5 and paired["against"]["sgbm"]["all"]["epe_lower"] == 3
+    one = fusion.paired_differences(per_seed[:1], "fusion")["against"]["no_vlm"]["all"]
+    assert one == {"epe": -0.5, "epe_lower": 1, "bad2": 2.0, "bad2_lower": 0}
+
+
+def test_condition_ranges_summarise_frames() -> None:
+    ranges = fusion.condition_ranges({"mirror_fooling_px": [3.0, 1.0, 2.0], "aligned_mono_epe_px": []})
+    assert ranges == {"mirror_fooling_px": {"frames": 3, "min": 1.0, "median": 2.0, "max": 3.0},
+                      "aligned_mono_epe_px": {"frames": 0}}
+
+
+def test_capture_baselines_cover_the_held_out_pairs() -> None:
+    """One frame of each capture seed at its drawn baseline against one of each test seed at 0.63 m: the
+    captures' disparities (1st-99th percentile) and mirror fooling span the test pairs'."""
+    baselines = [fusion.capture_baseline(seed) for seed in fusion.RENDERED_SEEDS]
+    assert all(fusion.TRAIN_BASELINE_M[0] <= b <= fusion.TRAIN_BASELINE_M[1] for b in baselines)
+    assert len(set(baselines)) == len(baselines) and baselines == [fusion.capture_baseline(s) for s in fusion.RENDERED_SEEDS]
+    captures = [s for seed, b in zip(fusion.RENDERED_SEEDS, baselines, strict=True)
+                for s in fusion.video_samples(render_video(seed, 1, *fusion.SIZE, baseline_m=b))]
+    tests = fusion.held_out_samples(fusion.TEST_SEEDS, frames=1)
+
+    def span(samples: list[Any]) -> tuple[float, float]:
+        return (min(np.nanpercentile(s.disparity, 1) for s in samples), max(np.nanpercentile(s.disparity, 99) for s in samples))
+
+    (train_lo, train_hi), (test_lo, test_hi) = span(captures), span(tests)
+    assert train_lo <= test_lo and test_hi <= train_hi, (train_lo, train_hi, test_lo, test_hi)
+    train_fooling = fusion.condition_values(captures)["mirror_fooling_px"]
+    test_fooling = fusion.condition_values(tests)["mirror_fooling_px"]
+    assert min(train_fooling) <= min(test_fooling) and max(test_fooling) <= max(train_fooling)
+    assert min(test_fooling) > 5  # at 0.63 m a mirror fools stereo by several pixels
+
+
+def test_redrawn_mono_is_an_independent_realistic_draw() -> None:
+    """A generated sample's ground truth is its source map scaled (rectified inside illusions): the
+    source aligns onto it exactly outside illusions; the redrawn input is as far off as a real network's
+    (the test pairs' mono-gt-align: about 2 px), still fooled completely by the picture."""
+    frame = render_video(3, 1, *fusion.SIZE).frames[0]
+    masks = {pair.illusion_type: pair.illusion for pair in frame.regions}
+    source, scale = frame.mono_disparity, 2.5
+    truth = (scale * source).astype(np.float32)
+    outside = ~(masks["picture"] | masks["mirror"])
+    redrawn = fusion.redrawn_mono(truth, source, scale, masks, seed=3, index=0)
+    assert redrawn.shape == truth.shape and redrawn.dtype == np.float32 and (redrawn > 0).all()
+
+    def aligned_error(mono: np.ndarray) -> float:
+        return float(np.mean(np.abs(align(mono, truth, outside, "lsq") - truth)[outside]))
+
+    assert aligned_error(source) < 1e-3 and 0.5 < aligned_error(redrawn) < 6
+    picture = masks["picture"]
+    fit = np.polyfit(truth[picture], redrawn[picture], 1)  # the depicted scene, as painted: an affine of it
+    assert np.abs(np.polyval(fit, truth[picture]) - redrawn[picture]).max() < 1e-3 * redrawn[picture].max()
+    again = fusion.redrawn_mono(truth, source, scale, masks, seed=3, index=0)
+    other = fusion.redrawn_mono(truth, source, scale, masks, seed=4, index=0)
+    assert np.array_equal(redrawn, again) and not np.allclose(redrawn, other)
+
+
+def test_pretraining_seeds_never_touch_the_benchmark_seeds(monkeypatch: pytest.MonkeyPatch) -> None:
+    seeds = pretrain.pretrain_seeds(50_000)
+    benchmark = pretrain.benchmark_seeds()
+    assert {*fusion.TEST_SEEDS, *fusion.VAL_SEEDS, *fusion.RENDERED_SEEDS, *range(fusion.GENERATED_VIDEOS)} <= benchmark
+    assert not benchmark.intersection(seeds) and min(seeds) > max(benchmark)
+    # the generated samples' mono estimators come from a seed range of their own too
+    assert max(seeds) < fusion.GENERATED_MONO_SEED
+    monkeypatch.setattr(pretrain, "PRETRAIN_FIRST_SEED", 98)
+    with pytest.raises(ValueError, match="benchmark's seed 100"):
+        pretrain.pretrain_seeds(5)
+    overrides = pretrain.pretrain_overrides(30)
+    assert overrides["train.steps"] == 30 and overrides["model.use_vlm"] is False
+    assert load_preset("lite", overrides).model.use_mono  # its trunk learns from the mono input
+
+
+@pytest.fixture(scope="module")
+def trunk_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("pretrain")
+    torch.manual_seed(1)
+    config = load_preset("lite", pretrain.pretrain_overrides(10))
+    save_checkpoint(folder / "best.pt", FusionNetwork(config.model), config, step=10)
+    save_trunk(folder / "best.pt", folder / "trunk.safetensors", {"steps": 10})
+    return folder / "trunk.safetensors"
+
+
+def test_trunk_file_holds_the_trunk_with_its_recipe_and_hash(trunk_file: Path, tmp_path: Path) -> None:
+    record = json.loads(trunk_file.with_suffix(".json").read_text())
+    trunk = load_trunk(trunk_file)
+    assert record["sha256"] == trunk.sha256 and record["recipe"] == trunk.recipe == {"steps": 10}
+    assert record["tensors"] == len(trunk.state) == 126 and all(n.startswith(TRUNK_PREFIXES) for n in trunk.state)
+    assert record["bytes"] < 4_000_000  # small enough to commit
+    changed = tmp_path / "trunk.safetensors"
+    data = bytearray(trunk_file.read_bytes())
+    data[-1] ^= 1
+    changed.write_bytes(bytes(data))
+    with pytest.raises(ValueError, match="trunk.json"):
+        load_trunk(changed)  # no record beside it
+    changed.with_suffix(".json").write_text(json.dumps(record))
+    with pytest.raises(ValueError, match="changed after pre-training"):
+        load_trunk(changed)
+
+
+def test_every_network_starts_from_the_trunk_and_its_own_fresh_heads(trunk_file: Path, tmp_path: Path) -> None:
+    """The composed init is what the engine loads (its model config is the run's), holds the trunk's
+    tensors, and elsewhere exactly what a fresh run of the same training seed starts with."""
+    trunk = load_trunk(trunk_file)
+    fresh_modules = {"fusion": {"vlm", "confidence", "fusion"}, "no_vlm": {"confidence", "fusion"}, "stereo_only": set()}
+    for network in NETWORKS:
+        overrides = fusion.network_overrides(network, 20)
+        config = load_preset("lite", overrides)
+        report = compose_init(trunk, config, 5, tmp_path / f"{network.name}.pt")
+        assert report["loaded"] == 126 and report["unused"] == []
+        assert {name.split(".")[0] for name in report["fresh"]} == fresh_modules[network.name]
+        loaded, stored, _payload = load_network(tmp_path / f"{network.name}.pt")
+        run_config = Config.from_dict(resolve_config("lite", {**overrides, "train.seed": 5}))
+        assert stored.model == run_config.model  # the engine refuses an init whose model config differs
+        torch.manual_seed(5)
+        scratch = FusionNetwork(config.model).trainable_state_dict()
+        state = loaded.trainable_state_dict()
+        assert all(torch.equal(state[name], trunk.state[name]) for name in trunk.state)
+        assert all(torch.equal(state[name], scratch[name]) for name in report["fresh"])
+
+
+def test_cli_pretrain_passes_its_options_and_prints_the_conditions(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    calls: list[dict[str, Any]] = []
+    ranges = {"mirror_fooling_px": {"frames": 4, "min": 5.5, "median": 9.0, "max": 20.25},
+              "aligned_mono_epe_px": {"frames": 8, "min": 1.0, "median": 2.0, "max": 3.0}}
+    result = {"trunk": {"file": "pretrain/trunk.safetensors", "sha256": "ab" * 32, "tensors": 126, "parameters": 639296,
+                        "bytes": 2_600_000, "recipe": {"run": 1, "best_step": 40, "data": {"seeds": [10000, 10002]}}},
+              "conditions": {"training": {"captures": ranges}, "held_out": ranges}, "timings_s": {"total": 1.0}}
+    monkeypatch.setattr(pretrain, "run_pretrain", lambda work_dir, **kw: calls.append({"work_dir": work_dir, **kw}) or result)
+    out = CliRunner().invoke(main, ["bench", "pretrain", "--work-dir", str(tmp_path), "--videos", "3", "--frames", "2",
+                                    "--steps", "40"])
+    assert out.exit_code == 0, out.output
+    assert calls == [{"work_dir": tmp_path.absolute(), "videos": 3, "frames": 2, "steps": 40}]
+    assert "4 frames: 5.50 / 9.00 / 20.25" in out.output and "pre-training captures" in out.output
+    assert "test pairs" in out.output and "ab" * 32 in out.output
+    out = CliRunner().invoke(main, ["bench", "pretrain", "--json", "--work-dir", str(tmp_path)])
+    assert out.exit_code == 0 and json.loads(out.output) == result
+    assert calls[-1] == {"work_dir": tmp_path.absolute(), "videos": pretrain.PRETRAIN_VIDEOS,
+                         "frames": pretrain.PRETRAIN_FRAMES, "steps": pretrain.PRETRAIN_STEPS}
+
+
+def test_cli_fusion_prints_the_conditions_the_figures_and_the_paired_record(tmp_path: Path,
+                                                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    ranges = {"mirror_fooling_px": {"frames": 36, "min": 5.96, "median": 16.5, "max": 19.9},
+              "aligned_mono_epe_px": {"frames": 36, "min": 1.0, "median": 1.8, "max": 2.6}}
+    per_seed = [{"fusion": {"mirror": {"epe": 2.0 + k, "bad2": 50.0}}, "stereo_only": {"mirror": {"epe": 2.5, "bad2": 40.0}}}
+                for k in range(2)]
+    results = {"pairs": {"split": "test", "seeds": [100, 103], "samples": 24, "baseline_m": 0.63, "disparity_px": [18.6, 51.0],
+                         "sha256": "c" * 64},
+               "train_disparity_px": [3.0, 70.0],
+               "conditions": {"training": {"captures": ranges, "generated": {**ranges, "mirror_fooling_px": {"frames": 0}}},
+                              "held_out": ranges},
+               "seeds": 2, "train_seeds": [0, 48], "split_seed": 0, "methods": fusion._aggregate(per_seed),
+               "paired": fusion.paired_differences(per_seed, "fusion"), "pretrained": None, "timings_s": {"total": 1.0}}
+    monkeypatch.setattr(fusion, "run_fusion_bench", lambda work_dir, **kw: results)
+    out = CliRunner().invoke(main, ["bench", "fusion", "--work-dir", str(tmp_path)])
+    assert out.exit_code == 0, out.output
+    lines = out.output.splitlines()
+    assert any(line.split()[:2] == ["training", "captures"] and "36 frames: 5.96 / 16.50 / 19.90" in line for line in lines)
+    assert any(line.split()[:2] == ["training", "generated"] and "none" in line for line in lines)
+    assert any(line.split()[:2] == ["test", "pairs"] for line in lines) and "at 0.63 m" in out.output
+    assert any(line.split()[:1] == ["fusion"] and "2.50 ± 0.50 / 50.00" in line for line in lines)
+    assert any(line.split()[:1] == ["stereo_only"] and "+0.00 ± 0.50 [1]" in line for line in lines)  # EPE: -0.5, +0.5
+    assert any(line.split()[:1] == ["stereo_only"] and "+10.00 ± 0.00 [0]" in line for line in lines)  # bad-2
+    assert "from scratch" in out.output

@@ -1,0 +1,89 @@
+"""``illusion-studio bench pretrain``: the fusion benchmark's pre-training stage (the paper pre-trains on
+SceneFlow, then fine-tunes on illusions).
+
+Many rendered scenes with exact disparity — seeds from PRETRAIN_FIRST_SEED on, a range kept apart
+from every seed the benchmark trains, validates or tests on — each rendered at a baseline drawn for it
+over the range that covers the held-out pairs' disparities (``fusion.capture_baseline``), imported as
+captures into a workspace of their own (``<work dir>/pretrain/workspace``) and accepted; one ``lite``
+run trains on them through the product's training job. The network trained is the no-VLM one, so that
+its mono context encoder learns from the mono input as the fusion networks' does; only its trunk
+(``webapp.benchmarks.trunk``) is kept, in ``<work dir>/pretrain/trunk.safetensors`` with
+``trunk.json`` (recipe and sha256) beside it, where ``bench fusion`` finds it.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+from dataset.models import TrainingRun
+from dataset.synthetic.io import FORMAT as SYNTHETIC_FORMAT
+from dataset.version import code_version
+from webapp.benchmarks import fusion
+from webapp.benchmarks.trunk import TRUNK_FILE, save_trunk
+
+PRETRAIN_FIRST_SEED = 10_000
+PRETRAIN_VIDEOS = 200
+PRETRAIN_FRAMES = 4  # per video: more scenes rather than more frames of one
+PRETRAIN_STEPS = 4000
+PRETRAIN_SPLIT = "train=0.95,val=0.05"  # by video, within the pre-training seeds
+PRETRAIN_SEED = 0
+# The no-VLM network (see the module docstring); validation and checkpoints spaced for the longer run.
+PRETRAIN_OVERRIDES: dict[str, Any] = {"model.use_vlm": False, "train.val_every": 500, "train.checkpoint_every": 500}
+
+
+def benchmark_seeds() -> set[int]:
+    """Every scene seed the fusion benchmark trains, validates or tests on."""
+    return {*range(fusion.GENERATED_VIDEOS), *fusion.RENDERED_SEEDS, *(s for seeds in fusion.SPLITS.values() for s in seeds)}
+
+
+def pretrain_seeds(videos: int) -> tuple[int, ...]:
+    """The scene seeds of ``videos`` pre-training videos; ValueError if any is one of the benchmark's."""
+    seeds = tuple(range(PRETRAIN_FIRST_SEED, PRETRAIN_FIRST_SEED + videos))
+    taken = sorted(benchmark_seeds().intersection(seeds))
+    if taken:
+        raise ValueError(f"pre-training seeds {seeds[0]}..{seeds[-1]} include the benchmark's seed {taken[0]}")
+    return seeds
+
+
+def pretrain_overrides(steps: int) -> dict[str, Any]:
+    """The overrides of ``lite`` the pre-training run uses for ``steps`` steps."""
+    return {**fusion.TRAIN_OVERRIDES, "train.steps": steps, **PRETRAIN_OVERRIDES}
+
+
+def run_pretrain(work_dir: Path, *, videos: int = PRETRAIN_VIDEOS, frames: int = PRETRAIN_FRAMES,
+                 steps: int = PRETRAIN_STEPS) -> dict[str, Any]:
+    """Prepare (or reuse) the pre-training data under ``work_dir/pretrain``, train on it for ``steps``
+    steps and write the trunk of the run's best checkpoint to ``work_dir/TRUNK_FILE``. Returns the
+    trunk's record (file, sha256, recipe), the conditions of the pre-training data beside the test
+    pairs', and the timings (seconds)."""
+    started = time.perf_counter()
+    seeds = pretrain_seeds(videos)
+    data = {"protocol": fusion.PROTOCOL, "seeds": [seeds[0], seeds[-1]], "frames": frames, "size": fusion.SIZE,
+            "capture_baselines_m": fusion.TRAIN_BASELINE_M, "synthetic": SYNTHETIC_FORMAT}
+    home = work_dir / "pretrain" / "workspace"
+    rt, conditions = fusion.bench_workspace(home, data)
+    cached = conditions is not None
+    if conditions is None:
+        conditions = fusion.finish_workspace(home, data, {"captures": fusion.import_captures(rt, seeds, frames)})
+    prepare_s = time.perf_counter() - started
+    try:
+        run_id = fusion.launch_run(rt, PRETRAIN_SEED, pretrain_overrides(steps), split=PRETRAIN_SPLIT)
+        fusion.run_jobs(rt)
+        checkpoint, train_s = fusion.trained_checkpoint(rt, run_id)
+        with rt.sessions() as s:
+            best_step = s.get(TrainingRun, run_id).best_step
+    finally:
+        rt.close()
+    recipe = {"preset": "lite", "overrides": pretrain_overrides(steps), "seed": PRETRAIN_SEED, "split": PRETRAIN_SPLIT,
+              "data": data, "run": run_id, "best_step": best_step, "code_version": code_version(),
+              "command": f"illusion-studio bench pretrain --videos {videos} --frames {frames} --steps {steps}"}
+    record = save_trunk(checkpoint, work_dir / TRUNK_FILE, recipe)
+    timed = time.perf_counter()
+    held_out = fusion.condition_ranges(fusion.condition_values(fusion.held_out_samples(fusion.TEST_SEEDS)))
+    return {"trunk": {**record, "file": str(TRUNK_FILE)},
+            "conditions": {"training": conditions, "held_out": held_out}, "prepare_cached": cached,
+            "timings_s": {"prepare": round(prepare_s, 1), "train": round(train_s, 1),
+                          "render_pairs": round(time.perf_counter() - timed, 1),
+                          "total": round(time.perf_counter() - started, 1)}}
