@@ -37,11 +37,14 @@ class UnsafeCheckpoint(ValueError):
 
 
 def save_checkpoint(path: Path, network: FusionNetwork, config: Config, *, step: int,
-                    extra: dict[str, Any] | None = None) -> None:
-    """Write the checkpoint of ``network`` at training ``step`` to ``path`` atomically."""
+                    extra: dict[str, Any] | None = None, source: dict[str, Any] | None = None) -> None:
+    """Write the checkpoint of ``network`` at training ``step`` to ``path`` atomically; ``source``
+    says where imported weights came from (plain values: file name, digest, architecture)."""
     payload = {"format": FORMAT, "config": config.to_dict(), "state": network.trainable_state_dict(),
                "frozen_hashes": network.frozen_state_hashes(), "frozen_paths": network.frozen_paths(),
                "step": int(step), "extra": extra or {}}
+    if source is not None:
+        payload["source"] = source
     buffer = io.BytesIO()
     torch.save(payload, buffer)
     atomic_write_bytes(Path(path), buffer.getvalue())
@@ -54,23 +57,31 @@ def load_checkpoint(path: Path, map_location: str = "cpu", *, label: str | None 
     relative to the workspace. Messages never quote the file's bytes.
     """
     path, label = Path(path), label or str(path)
+    payload = read_weights_only(path, label, map_location=map_location,
+                                hint=f"a checkpoint written before weights-only loading can be converted with "
+                                     f"`{UPGRADE_HINT}`")
+    if not isinstance(payload, dict) or payload.get("format") != FORMAT:
+        raise ValueError(f"{label} is not an Illusion Studio fusion-model checkpoint")
+    return payload
+
+
+def read_weights_only(path: Path, label: str, *, map_location: str = "cpu", hint: str = "") -> Any:
+    """``torch.load(path, weights_only=True)``: tensors and plain values only. UnsafeCheckpoint for a
+    file that names other Python objects (``hint`` says what to do), ValueError for one that is
+    missing or unreadable; messages name the file by ``label`` and never quote its bytes."""
     if not path.is_file():
         raise ValueError(f"checkpoint {label} does not exist")
     if not zipfile.is_zipfile(path):  # torch.save has written zip archives since torch 1.6
         raise ValueError(f"{label} is not a readable checkpoint")
     try:
-        payload = torch.load(path, map_location=map_location, weights_only=True)
+        return torch.load(path, map_location=map_location, weights_only=True)
     except pickle.UnpicklingError:
         # weights_only refuses any global it does not allow: an older checkpoint's numpy RNG
         # state, or a pickle that would run code. Neither is loaded here.
-        raise UnsafeCheckpoint(
-            f"{label} holds Python objects beyond tensors and plain values and is not loaded: a checkpoint "
-            f"written before weights-only loading can be converted with `{UPGRADE_HINT}`") from None
+        raise UnsafeCheckpoint(f"{label} holds Python objects beyond tensors and plain values and is not loaded"
+                               + (f": {hint}" if hint else " (weights-only loading)")) from None
     except Exception:  # torch raises many kinds for a file that is not a checkpoint
         raise ValueError(f"{label} is not a readable checkpoint") from None
-    if not isinstance(payload, dict) or payload.get("format") != FORMAT:
-        raise ValueError(f"{label} is not an Illusion Studio fusion-model checkpoint")
-    return payload
 
 
 def load_network(path: Path, device: str = "cpu", *,

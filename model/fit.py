@@ -3,7 +3,8 @@ machine's, estimated before anything starts.
 
 The memory model follows how the engine trains: each rank runs one forward/backward per sample
 (the batch is accumulated), so a rank's peak is a base (interpreter, libraries, weights, optimizer)
-plus a term in crop area × GRU iterations; the frozen backbones' weights come on top of each rank;
+plus a term in crop area × GRU iterations (and, for RAFT-Stereo's full-width encoders, one in crop
+area alone); the frozen backbones' weights come on top of each rank;
 the data loader holds the global batch. The coefficients are measured per (preset, device) by
 ``illusion-studio bench memory`` (which prints the fit beside every measured peak).
 """
@@ -25,8 +26,18 @@ from model.presets import Config
 # (2026-12-02: 526–1079 MB measured at 0.25–3.4 Mpx·iterations; README).
 # paper: not runnable on this CPU; scaled from lite by the ratio of its GRU and feature widths
 # (activations dominate the per-pixel term) until a GPU machine measures it.
+# raft-stereo/cpu: the trainer's peaks at 128x256 (4, 8 iterations), 192x320 (8) and 256x384 (8, 12), 1.4–3.3 GB,
+# fitted with AREA_MB (2026-12-03, residuals ≤ 91 MB; /work/notes/raft.md). Its full-width encoders
+# (a 64-channel stem at full resolution for n_downsample 2) hold most of its memory whatever the
+# iterations: without that term the two-term fit underestimates 320x720 at 4 iterations by half.
+# A GPU has no figures of its own yet: it borrows the preset's CPU ones (activations in float32, an upper bound under AMP).
 MEMORY_MB: dict[tuple[str, str], tuple[float, float]] = {
     ("lite", "cpu"): (506.0, 176.0),
+    ("raft-stereo", "cpu"): (760.0, 703.0),
+}
+# (preset, device) → MB per megapixel of crop whatever the iterations (0 where unmeasured: lite's fit needs none).
+AREA_MB: dict[tuple[str, str], float] = {
+    ("raft-stereo", "cpu"): 17330.0,
 }
 _PAPER_SCALE = 8.0  # paper's widths (hidden 3×128, features 256) over lite's (3×32, 48): ≈ 4–5×, with margin
 LOADER_BYTES_PER_PIXEL = 4 * (3 + 3 + 1 + 1 + 1)  # float32 left, right, disparity, mono, valid
@@ -46,12 +57,18 @@ class MemoryEstimate:
 
 
 def coefficients(preset: str, device: str) -> tuple[float, float]:
-    """(base MB, MB per megapixel·iteration) of a rank of ``preset`` on ``device`` (cpu or cuda)."""
-    key = (preset, "cpu" if device == "cpu" else "cuda")
-    if key in MEMORY_MB:
-        return MEMORY_MB[key]
+    """(base MB, MB per megapixel·iteration) of a rank of ``preset`` on ``device`` (cpu or cuda): its
+    own figures, else the preset's CPU ones, else lite's (scaled for paper)."""
+    for key in ((preset, "cpu" if device == "cpu" else "cuda"), (preset, "cpu")):
+        if key in MEMORY_MB:
+            return MEMORY_MB[key]
     base, per_pixel = MEMORY_MB[("lite", "cpu")]
     return base, per_pixel * (_PAPER_SCALE if preset == "paper" else 1.0)
+
+
+def area_coefficient(preset: str, device: str) -> float:
+    """MB per megapixel of crop, whatever the iterations, of a rank of ``preset`` on ``device``."""
+    return AREA_MB.get((preset, "cpu" if device == "cpu" else "cuda"), AREA_MB.get((preset, "cpu"), 0.0))
 
 
 def frozen_weights_mb(config: Config) -> float:
@@ -67,7 +84,8 @@ def estimate_memory(config: Config, *, nproc: int, device: str) -> MemoryEstimat
     """The run's peak memory (MB) on one machine: ``nproc`` ranks of ``config``'s preset on ``device``."""
     height, width = config.train.crop
     base, per_pixel = coefficients(config.preset, device)
-    per_rank = base + per_pixel * height * width / 1e6 * config.train.train_iters
+    megapixels = height * width / 1e6
+    per_rank = base + per_pixel * megapixels * config.train.train_iters + area_coefficient(config.preset, device) * megapixels
     loader = config.train.batch_size * height * width * LOADER_BYTES_PER_PIXEL / 2**20
     return MemoryEstimate(per_rank, nproc, frozen_weights_mb(config), loader)
 

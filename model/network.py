@@ -1,6 +1,8 @@
 """The VLM-driven monocular–stereo fusion network (paper section 4), wiring the branches as
 RAFT-Stereo's ``raft_stereo.py`` does: mono branch → context → stereo GRU iterations → VLM
-embeddings → flow confidence → global fusion."""
+embeddings → flow confidence → global fusion. With ``model.architecture = "raft-stereo"`` the same
+class is RAFT-Stereo's own stereo-only network (model/stereo/raft_stereo.py), so training,
+checkpoints, prediction and evaluation treat both alike."""
 
 from __future__ import annotations
 
@@ -15,7 +17,8 @@ from model.confidence import ConfidenceHead
 from model.fusion import GlobalFusion
 from model.mono import make_mono, normalize_mono
 from model.presets import ModelConfig
-from model.stereo.raft import StereoBranch
+from model.stereo.raft import StereoBranch, StereoResult
+from model.stereo.raft_stereo import RaftStereoBranch
 from model.vlm import make_vlm
 
 # Parameters under these prefixes are frozen backbones: never trained, never stored in checkpoints
@@ -31,7 +34,7 @@ class FusionOutput:
     mono_aligned: Tensor  # B×1×H×W, pixels: s_m·D_m + t_m, upsampled to full resolution
     confidence: Tensor  # B×1×h×w in (0, 1) at the stereo working resolution
     confidence_logits: Tensor  # same shape, pre-sigmoid
-    mono: Tensor  # B×1×H×W, the relative mono disparity used (given or estimated)
+    mono: Tensor  # B×1×H×W, the relative mono disparity used (given or estimated; zeros for RAFT-Stereo)
     # A stereo-only network's (model.use_mono off): disparity is the stereo branch's, fully trusted
     # (confidence 1, logits +inf), no aligned mono (zeros); the loss is the iterates' alone.
     stereo_only: bool = False
@@ -45,8 +48,10 @@ class FusionNetwork(nn.Module):
         super().__init__()
         self.config = config
         self.factor = 2**config.n_downsample
-        self.mono = make_mono(config)
-        self.stereo_branch = StereoBranch(config, self.mono.feature_channels)
+        # RAFT-Stereo's context comes from an image encoder of its own: no mono branch at all.
+        self.mono = make_mono(config) if config.architecture == "fusion" else None
+        self.stereo_branch: StereoBranch | RaftStereoBranch = (
+            StereoBranch(config, self.mono.feature_channels) if self.mono is not None else RaftStereoBranch(config))
         self.vlm = make_vlm(config) if config.use_vlm else None
         condition_dim = self.vlm.dim if self.vlm is not None else 0
         # Built only where they are used: DDP requires every parameter to get a gradient.
@@ -64,15 +69,18 @@ class FusionNetwork(nn.Module):
         self._check(left, right, mono)
         all_iterates = self.training if all_iterates is None else all_iterates
         left_n, right_n = 2 * (left / 255.0) - 1, 2 * (right / 255.0) - 1
+        if self.mono is None:
+            assert isinstance(self.stereo_branch, RaftStereoBranch)
+            stereo = self.stereo_branch(left_n, right_n, iters=iters, all_iterates=all_iterates)
+            return _stereo_only(stereo, torch.zeros_like(left[:, :1]))
         # Stereo only: the context encoder sees the left image beside a constant, never the mono input.
         mono_result = self.mono(left_n, mono if self.config.use_mono else torch.zeros_like(left[:, :1]))
         mono_full = normalize_mono(mono_result.disparity)
         mono_low = F.avg_pool2d(mono_full, self.factor)
+        assert isinstance(self.stereo_branch, StereoBranch)
         stereo = self.stereo_branch(left_n, right_n, mono_result.features, iters=iters, all_iterates=all_iterates)
         if self.confidence is None or self.fusion is None:
-            last, low = stereo.iterates[-1], stereo.iterates_low[-1]
-            return FusionOutput(last, stereo.iterates, last, torch.zeros_like(last), torch.ones_like(low),
-                                torch.full_like(low, torch.inf), mono_result.disparity, stereo_only=True)
+            return _stereo_only(stereo, mono_result.disparity)
         disparity_low = stereo.iterates_low[-1]
         cost = stereo.corr.lookup(disparity_low.detach())
         if self.vlm is not None:
@@ -137,6 +145,13 @@ class FusionNetwork(nn.Module):
     def trainable_parameters(self) -> list[nn.Parameter]:
         """Parameters the optimiser updates (frozen backbones excluded, their LoRA adapters included)."""
         return [p for p in self.parameters() if p.requires_grad]
+
+
+def _stereo_only(stereo: StereoResult, mono: Tensor) -> FusionOutput:
+    """A stereo-only network's output: its last iterate, fully trusted, no aligned mono."""
+    last, low = stereo.iterates[-1], stereo.iterates_low[-1]
+    return FusionOutput(last, stereo.iterates, last, torch.zeros_like(last), torch.ones_like(low),
+                        torch.full_like(low, torch.inf), mono, stereo_only=True)
 
 
 def _is_frozen(name: str) -> bool:

@@ -1,4 +1,5 @@
-"""numpy pair → disparity: padding to the network's size multiple, device, AMP, cropping back."""
+"""numpy pair → disparity: padding as the network needs (bottom/right to the fusion network's size
+multiple; centred to 32 for RAFT-Stereo, as its demo), device, AMP, cropping back."""
 
 from __future__ import annotations
 
@@ -40,12 +41,14 @@ class Predictor:
         full_height, full_width = left.shape[:2]
         left, right = self._shrunk(left), self._shrunk(right)
         height, width = left.shape[:2]
-        multiple = self.network.size_multiple
+        multiple, centred = self.config.model.inference_padding
         pad_h, pad_w = -height % multiple, -width % multiple
+        top, left_pad = (pad_h // 2, pad_w // 2) if centred else (0, 0)
+        padding = (left_pad, pad_w - left_pad, top, pad_h - top)
 
         def tensor(image: np.ndarray) -> torch.Tensor:
             t = torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None].float().to(self.device)
-            return F.pad(t, (0, pad_w, 0, pad_h), mode="replicate")
+            return F.pad(t, padding, mode="replicate")
 
         mono_t = None
         if mono is not None:
@@ -54,7 +57,7 @@ class Predictor:
                 raise ValueError(f"mono must be a finite float H×W map, got shape {mono.shape}")
             mono_t = torch.from_numpy(mono)[None, None].to(self.device)
             mono_t = F.interpolate(mono_t, (height, width), mode="bilinear", align_corners=False)
-            mono_t = F.pad(mono_t, (0, pad_w, 0, pad_h), mode="replicate")
+            mono_t = F.pad(mono_t, padding, mode="replicate")
         generator = torch.Generator(device=self.device).manual_seed(seed)
         amp = self.config.train.amp and self.device.type == "cuda"
         with torch.inference_mode(), torch.autocast(self.device.type, enabled=amp):
@@ -64,7 +67,7 @@ class Predictor:
                                    align_corners=False)
 
         def crop(t: torch.Tensor, *, disparity: bool = True) -> np.ndarray:
-            t = t[:, :, :height, :width].float()
+            t = t[:, :, top:top + height, left_pad:left_pad + width].float()
             if (height, width) != (full_height, full_width):  # back to the input's size, in its pixels
                 t = F.interpolate(t, (full_height, full_width), mode="bilinear", align_corners=False)
                 t = t * (full_width / width) if disparity else t

@@ -17,12 +17,22 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+# The fusion network's presets; BASELINE_PRESETS are stereo-only baselines (RAFT-Stereo's own
+# network, architecture "raft-stereo"), loadable alike.
 PRESETS: tuple[str, ...] = ("lite", "paper")
+BASELINE_PRESETS: tuple[str, ...] = ("raft-stereo",)
+ALL_PRESETS: tuple[str, ...] = PRESETS + BASELINE_PRESETS
 PRESET_DIR = Path(__file__).parent / "presets"
+# RAFT-Stereo's demo pads a pair centred to a multiple of 32 (its InputPadder); an imported
+# checkpoint predicts what the demo does only with the same padding (instance norm sees it).
+RAFT_STEREO_PAD = 32
 
 MonoBackend = Literal["precomputed", "depth-anything-v2"]
 VlmBackend = Literal["lite", "qwen2-vl"]
 FusionRule = Literal["paper", "released"]
+Architecture = Literal["fusion", "raft-stereo"]
+ContextNorm = Literal["batch", "instance", "group", "none"]
+UpsampleBorder = Literal["edge", "zeros"]
 ConfidenceTarget = Literal["threshold", "closer"]
 
 
@@ -76,19 +86,53 @@ class ModelConfig:
     # Inference on a larger pair runs on it shrunk to this many pixels (0: never), the disparity
     # scaled back up: what keeps the CPU-sized preset within its time budget at 1080p.
     max_inference_pixels: int = 0
+    # "fusion": the paper's network. "raft-stereo": RAFT-Stereo's own stereo network, a stereo-only
+    # baseline (use_mono and use_vlm off) whose context comes from an image encoder of its own;
+    # its published checkpoints import into it (model/raft_import.py).
+    architecture: Architecture = "fusion"
+    # RAFT-Stereo's options (its argparse names: context_norm, n_gru_layers, shared_backbone,
+    # slow_fast_gru); only "raft-stereo" has them. shared_backbone: matching features from the
+    # context encoder's trunk (RAFT-Stereo "realtime"); slow_fast_gru: before each full update the
+    # coarser GRU levels run once more (with 3 levels the coarsest twice more).
+    context_norm: ContextNorm = "batch"
+    gru_levels: int = 3
+    shared_backbone: bool = False
+    slow_fast_gru: bool = False
+    # What the convex upsampling's 3×3 window sees past the border: "edge" (replicated, keeps the
+    # outer pixels right) or "zeros" (RAFT's, which its published weights were trained with).
+    upsample_border: UpsampleBorder = "edge"
 
     @property
     def size_multiple(self) -> int:
         """What both image sides must be a multiple of, in pixels: the GRU's coarsest level, the
         flow's tokens and the lite VLM's patches all tile the image exactly."""
+        if self.architecture == "raft-stereo":
+            return 2 ** (self.n_downsample + self.gru_levels - 1)
         multiples = [2 ** (self.n_downsample + 2), 2**self.token_downsample]
         if self.use_vlm and self.vlm_backend == "lite":
             multiples.append(self.vlm_patch)
         return math.lcm(*multiples)
 
+    @property
+    def inference_padding(self) -> tuple[int, bool]:
+        """How a predictor pads a pair: (to a multiple of this many pixels, centred). RAFT-Stereo pads
+        centred to 32 with replication, as its demo does; the fusion network bottom/right to its
+        size multiple."""
+        if self.architecture == "raft-stereo":
+            return math.lcm(RAFT_STEREO_PAD, self.size_multiple), True
+        return self.size_multiple, False
+
     def __post_init__(self) -> None:
         if self.n_downsample not in (2, 3):
             raise ValueError(f"model.n_downsample must be 2 or 3, got {self.n_downsample}")
+        if self.gru_levels not in (1, 2, 3):
+            raise ValueError(f"model.gru_levels must be 1, 2 or 3, got {self.gru_levels}")
+        if self.architecture == "fusion" and (self.gru_levels != 3 or self.shared_backbone or self.slow_fast_gru):
+            raise ValueError("model.gru_levels other than 3, model.shared_backbone and model.slow_fast_gru are "
+                             "RAFT-Stereo's: they need model.architecture = 'raft-stereo'")
+        if self.architecture == "raft-stereo" and (self.use_mono or self.use_vlm):
+            raise ValueError("model.architecture = 'raft-stereo' is stereo only: it needs model.use_mono = false "
+                             "and model.use_vlm = false")
         if min(self.encoder_blocks[1:]) < 1:
             raise ValueError("model.encoder_blocks: the two strided stages need at least one block each")
         if self.token_downsample < self.n_downsample:
@@ -171,10 +215,10 @@ class Config:
 
 
 def load_preset(name: str, overrides: Mapping[str, Any] | None = None) -> Config:
-    """The preset ``name`` (one of PRESETS) with ``overrides`` applied: keys "section.field" or a
+    """The preset ``name`` (one of ALL_PRESETS) with ``overrides`` applied: keys "section.field" or a
     field name found in one section only. ValueError naming an unknown preset, key or bad value."""
-    if name not in PRESETS:
-        raise ValueError(f"unknown model preset {name!r}; choose one of {', '.join(PRESETS)}")
+    if name not in ALL_PRESETS:
+        raise ValueError(f"unknown model preset {name!r}; choose one of {', '.join(ALL_PRESETS)}")
     with open(PRESET_DIR / f"{name}.toml", "rb") as handle:
         data = tomllib.load(handle)
     for key, value in (overrides or {}).items():

@@ -1,6 +1,11 @@
 """Checkpoints by name: a run's ``best``, ``last`` or one of its files — what a request may name
-instead of a server path — and the current model, which ``predict`` and evaluation use when none
-is named.
+instead of a server path — an imported checkpoint, and the current model, which ``predict`` and
+evaluation use when none is named.
+
+One way to name a checkpoint (:func:`resolve`): ``RUN:NAME`` — a run's ``best``, ``last`` or file
+name, as the web's forms name it (``3:best``, ``3:step_0001000.pt``) — or ``imported:NAME``, a
+checkpoint ``illusion-studio checkpoints import`` wrote to ``<home>/checkpoints/imported/NAME.pt``;
+the command line may also give a file's path.
 
 ``<home>/models/current.json`` = ``{"run": id, "file": name, "step": n, "checkpoint": path}``
 (the path relative to the workspace for a run's file; absolute only for a file the command line
@@ -15,6 +20,7 @@ from __future__ import annotations
 import fcntl
 import json
 import os
+import re
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,12 +29,18 @@ from typing import Any
 from sqlalchemy.orm import Session
 
 from dataset.atomic import atomic_write_bytes
+from dataset.contained import LinkedFolder
 from dataset.services import training
-from dataset.services.errors import InvalidInput, NotFound
+from dataset.services.errors import Conflict, InvalidInput, NotFound
 from model.train import BEST_NAME, CHECKPOINT_DIR, KEEP_FILE
 
 CURRENT = "current.json"
 ALIASES = ("best", "last")
+IMPORTED = "imported"
+IMPORTED_DIR = Path("checkpoints") / IMPORTED  # under the workspace home
+IMPORTED_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
+_RUN_NAME = re.compile(r"(\d+):([^/\\]+)")
+NAME_HINT = "RUN:NAME (a run's best, last or checkpoint file, e.g. 3:best) or imported:NAME"
 
 
 @dataclass(frozen=True)
@@ -75,12 +87,108 @@ def run_checkpoint(runs_dir: Path, run_id: int, which: str, *, best_step: int | 
     return found
 
 
+@dataclass(frozen=True)
+class ResolvedCheckpoint:
+    """A named checkpoint's file and how answers name it (``3:best``, ``imported:x``; never a path)."""
+
+    path: Path
+    name: str
+    run: int | None = None
+
+
+def checkpoint_name(run: int, file: str) -> str:
+    """The name :func:`resolve` takes for a run's checkpoint file (or alias)."""
+    return f"{run}:{file}"
+
+
+def imported_path(home: Path, name: str) -> Path:
+    """Where the imported checkpoint ``name`` lives; InvalidInput for a name that is not one."""
+    if not IMPORTED_NAME.fullmatch(name):
+        raise InvalidInput(f"imported checkpoint name {name!r}: use 1–64 letters, digits, '.', '_' or '-', "
+                           "starting with a letter or digit")
+    return Path(home) / IMPORTED_DIR / f"{name}.pt"
+
+
+def imported_names(home: Path) -> list[str]:
+    """The workspace's imported checkpoints, by name (never through a link)."""
+    folder = Path(home) / IMPORTED_DIR
+    if not folder.is_dir() or folder.is_symlink():
+        return []
+    return sorted(p.stem for p in folder.glob("*.pt") if p.is_file() and not p.is_symlink()
+                  and IMPORTED_NAME.fullmatch(p.stem))
+
+
+def is_name(text: str) -> bool:
+    """Whether ``text`` is a checkpoint name (``RUN:NAME`` or ``imported:NAME``) rather than a path."""
+    return text.startswith(f"{IMPORTED}:") or _RUN_NAME.fullmatch(text) is not None
+
+
+def resolve(settings: Any | None, text: str, *, allow_path: bool = False) -> ResolvedCheckpoint:
+    """The checkpoint ``text`` names: ``RUN:NAME`` or ``imported:NAME`` in the workspace of
+    ``settings`` — or, with ``allow_path`` (the command line's), any other text as a file path, which
+    needs no workspace. InvalidInput for what is not a name, NotFound saying what exists for a name
+    that names nothing."""
+    if not is_name(text):
+        if allow_path:
+            return ResolvedCheckpoint(Path(text).expanduser(), Path(text).name)
+        raise InvalidInput(f"checkpoint {text!r}: expected {NAME_HINT}")
+    if settings is None:
+        raise InvalidInput(f"checkpoint {text!r} is a name: naming a checkpoint needs a workspace (--data-dir)")
+    kind, name = text.split(":", 1)
+    if kind == IMPORTED:
+        path = imported_path(Path(settings.home), name)
+        if not path.is_file() or path.is_symlink():
+            have = ", ".join(f"{IMPORTED}:{n}" for n in imported_names(Path(settings.home))) or "none"
+            raise NotFound(f"no imported checkpoint {name!r} (imported: {have}; "
+                           "`illusion-studio checkpoints import --from raft-stereo FILE` adds one)")
+        return ResolvedCheckpoint(path, text)
+    run, runs_dir = int(kind), Path(settings.runs_dir)
+    if not training.run_dir(runs_dir, run).is_dir():
+        raise NotFound(f"no run {run} in this workspace")
+    return ResolvedCheckpoint(run_checkpoint(runs_dir, run, name, best_step=None).path, text, run)
+
+
+IMPORT_SOURCES = ("raft-stereo",)
+
+
+def import_checkpoint(settings: Any, file: Path, *, source: str, name: str | None = None,
+                      replace: bool = False) -> dict[str, Any]:
+    """Convert the published checkpoint ``file`` (``source``: one of IMPORT_SOURCES) and register it
+    in the workspace as ``imported:NAME`` (default NAME: the file's stem). Returns ``{"checkpoint":
+    the name, "architecture", "keys_loaded", …}``; InvalidInput for a bad name or a file that is not
+    such a checkpoint (one line), Conflict when the name is taken and ``replace`` is not given."""
+    if source not in IMPORT_SOURCES:
+        raise InvalidInput(f"unknown checkpoint source {source!r}; choose one of {', '.join(IMPORT_SOURCES)}")
+    from model.raft_import import import_file
+
+    name = name or re.sub(r"[^A-Za-z0-9._-]", "-", Path(file).stem).lstrip("._-")[:64] or source
+    destination = imported_path(Path(settings.home), name)
+    if destination.exists() and not replace:
+        raise Conflict(f"{IMPORTED}:{name} exists; choose another name or replace it")
+    try:
+        result = import_file(Path(file), destination)
+    except ValueError as exc:  # not a checkpoint of that source, unreadable, or a pickle naming code
+        raise InvalidInput(str(exc).splitlines()[0]) from None
+    return {"checkpoint": f"{IMPORTED}:{name}", **result}
+
+
+def with_checkpoint_names(row: dict[str, Any]) -> dict[str, Any]:
+    """A run's JSON (:func:`dataset.services.training.run_json`) with ``checkpoint_name`` and
+    ``best_checkpoint_name`` added: its last and best checkpoints as :func:`resolve` takes them."""
+    return {**row,
+            "checkpoint_name": checkpoint_name(row["run"], row["checkpoint"]) if row.get("checkpoint") else None,
+            "best_checkpoint_name": checkpoint_name(row["run"], "best") if row.get("best_checkpoint") else None}
+
+
 def named_checkpoints(session: Session, runs_dir: Path, limit: int = 50) -> list[dict[str, Any]]:
     """What a form offers to start from or evaluate: each recent run's ``best`` and ``last``, with
     their steps — ``{"run", "checkpoint", "label"}``, newest run first."""
     choices = []
     for run_id, best_step in training.recent_runs(session, limit):
-        files = run_checkpoints(runs_dir, run_id)
+        try:
+            files = run_checkpoints(runs_dir, run_id)
+        except LinkedFolder:  # a planted link is refused where the run is opened; the forms still list the others
+            continue
         if best_step is not None and any(f.name == BEST_NAME for f in files):
             choices.append({"run": run_id, "checkpoint": "best", "label": f"run {run_id} · best (step {best_step})"})
         last = next((f for f in files if f.name.startswith("step_")), None)

@@ -13,7 +13,8 @@ pytestmark = pytest.mark.browser
 NAV = {
     "annotator": ["dashboard", "annotate", "frames", "samples", "jobs"],
     "curator": ["dashboard", "annotate", "frames", "review", "samples", "export", "ingest", "models", "evaluation", "jobs"],
-    "admin": ["dashboard", "annotate", "frames", "review", "samples", "export", "ingest", "models", "evaluation", "jobs", "users"],
+    "admin": ["dashboard", "annotate", "frames", "review", "samples", "export", "ingest", "models", "evaluation", "jobs",
+              "users"],
 }
 
 

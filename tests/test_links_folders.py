@@ -122,6 +122,10 @@ def test_a_run_folder_that_is_a_link_serves_no_log_picture_or_checkpoint(client,
     shown = client.get(f"/api/v1/runs/{run_id}", headers=curator)  # the run's row is still shown, with no files
     assert shown.status_code == 200 and shown.json["checkpoints"] == [] and shown.json["checkpoint"] is None
     assert client.get("/api/v1/runs", headers=curator).status_code == 200
+    # the pages that list runs' checkpoints (launch and evaluation forms) leave that run out, not answer 404
+    admin = bearer(tokens, "admin")
+    assert client.get("/models", headers=admin).status_code == 200
+    assert client.get("/evaluations", headers=admin).status_code == 200
 
 
 def test_a_report_written_with_out_is_not_served(client, tokens, runtime, tmp_path) -> None:  # type: ignore[no-untyped-def]

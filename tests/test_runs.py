@@ -340,3 +340,20 @@ def test_cli_train_refuses_an_empty_selection_and_launches_with_json(settings, r
     assert json.loads(_cli(settings, "runs", "show", str(data["run"]), "--json").stdout)["state"] == "cancelled"
     refused = _cli(settings, "runs", "promote", str(data["run"]))
     assert refused.exit_code == 1 and "no best checkpoint yet" in refused.output
+
+
+@pytest.mark.parametrize(("steps", "said"), [("1e12", "at most"), ("1e", "'1e' is not a whole number"),
+                                             ("2.5", "not a whole number"), ("0", "at least 1")])
+def test_cli_train_numbers_are_told_what_is_wrong(settings, runtime, steps: str, said: str) -> None:  # type: ignore[no-untyped-def]
+    with transaction(runtime.sessions) as s:
+        add_accepted_samples(s, runtime.media, videos=3)
+    result = CliRunner().invoke(main, ["--data-dir", str(settings.home), "train", "--steps", steps])
+    assert result.exit_code != 0 and said in result.output, result.output
+    assert json.loads(_cli(settings, "runs", "list", "--json").stdout) == []
+
+
+def test_cli_train_takes_whole_numbers_written_with_an_exponent(settings, runtime) -> None:  # type: ignore[no-untyped-def]
+    with transaction(runtime.sessions) as s:
+        add_accepted_samples(s, runtime.media, videos=3)
+    launched = _cli(settings, "train", "--steps", "4e0", "--crop", "32x64", "--batch", "1", "--json")
+    assert launched.exit_code == 0 and json.loads(launched.stdout)["steps"] == 4, launched.output

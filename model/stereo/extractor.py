@@ -8,12 +8,15 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor, nn
 
-Norm = str  # "instance" | "group" | "none"
+Norm = str  # "instance" | "group" | "batch" | "none"
 
 
 def norm_layer(kind: Norm, channels: int) -> nn.Module:
     """A normalisation of ``channels``: instance (matching features, as RAFT-Stereo's fnet),
-    group (context: keeps absolute levels and works at batch size 1) or none."""
+    group (context: keeps absolute levels and works at batch size 1), batch (RAFT-Stereo's
+    published context encoders, frozen in training) or none."""
+    if kind == "batch":
+        return nn.BatchNorm2d(channels)
     if kind == "instance":
         return nn.InstanceNorm2d(channels)
     if kind == "group":
@@ -44,9 +47,10 @@ class ResidualBlock(nn.Module):
 class FeatureEncoder(nn.Module):
     """B×in×H×W → B×out×H/2**n×W/2**n. The stem is strided when n_downsample is 3 (as RAFT-Stereo),
     then ``blocks[0]`` blocks at the stem's resolution and two stages of ``blocks[1]``, ``blocks[2]``
-    blocks, each opening with a stride-2 block."""
+    blocks, each opening with a stride-2 block; a 1×1 convolution to ``out_channels`` ends it, or
+    nothing (``out_channels`` None: the trunk of RAFT-Stereo's context encoder, B×dims[2]×…)."""
 
-    def __init__(self, in_channels: int, out_channels: int, dims: Sequence[int], blocks: Sequence[int], *,
+    def __init__(self, in_channels: int, out_channels: int | None, dims: Sequence[int], blocks: Sequence[int], *,
                  n_downsample: int, stem_kernel: int, norm: Norm) -> None:
         super().__init__()
         stem_stride = 2 if n_downsample == 3 else 1
@@ -58,7 +62,7 @@ class FeatureEncoder(nn.Module):
             layers.append(ResidualBlock(previous, dim, norm, stride=2))
             layers.extend(ResidualBlock(dim, dim, norm) for _ in range(count - 1))
         self.layers = nn.Sequential(*layers)
-        self.out = nn.Conv2d(dims[2], out_channels, 1)
+        self.out = nn.Conv2d(dims[2], out_channels, 1) if out_channels is not None else nn.Identity()
         for module in self.modules():
             if isinstance(module, nn.Conv2d):
                 nn.init.kaiming_normal_(module.weight, mode="fan_out", nonlinearity="relu")

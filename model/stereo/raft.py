@@ -57,6 +57,7 @@ class StereoBranch(nn.Module):
         super().__init__()
         self.factor = 2**config.n_downsample
         self.levels, self.radius = config.corr_levels, config.corr_radius
+        self.border = config.upsample_border
         self.features = FeatureEncoder(3, config.feature_dim, config.encoder_dims, config.encoder_blocks,
                                        n_downsample=config.n_downsample, stem_kernel=config.stem_kernel,
                                        norm="instance")
@@ -84,6 +85,6 @@ class StereoBranch(nn.Module):
             disparity = disparity + delta
             low.append(disparity)
             if mask is not None:
-                full.append(convex_upsample(disparity, mask, self.factor))
+                full.append(convex_upsample(disparity, mask, self.factor, self.border))
         assert mask is not None
         return StereoResult(low, full, net[0], mask, left_features, corr)

@@ -34,27 +34,30 @@ class ConvGRU(nn.Module):
 
 
 class MotionEncoder(nn.Module):
-    """Correlation samples and the current disparity → ``dim`` channels (the last one is the
-    disparity itself, as RAFT keeps the flow)."""
+    """Correlation samples and the current flow (``flow_channels``: 1, the disparity; RAFT-Stereo's
+    2, flow x and y) through two ``width``-wide stacks → ``out_channels`` channels, the last
+    ``flow_channels`` of them the flow itself, as RAFT keeps it."""
 
-    def __init__(self, corr_channels: int, dim: int) -> None:
+    def __init__(self, corr_channels: int, width: int, out_channels: int, flow_channels: int = 1) -> None:
         super().__init__()
-        self.corr = nn.Sequential(nn.Conv2d(corr_channels, dim, 1), nn.ReLU(inplace=True),
-                                  nn.Conv2d(dim, dim, 3, padding=1), nn.ReLU(inplace=True))
-        self.disp = nn.Sequential(nn.Conv2d(1, dim, 7, padding=3), nn.ReLU(inplace=True),
-                                  nn.Conv2d(dim, dim, 3, padding=1), nn.ReLU(inplace=True))
-        self.out = nn.Conv2d(2 * dim, dim - 1, 3, padding=1)
+        self.corr = nn.Sequential(nn.Conv2d(corr_channels, width, 1), nn.ReLU(inplace=True),
+                                  nn.Conv2d(width, width, 3, padding=1), nn.ReLU(inplace=True))
+        self.disp = nn.Sequential(nn.Conv2d(flow_channels, width, 7, padding=3), nn.ReLU(inplace=True),
+                                  nn.Conv2d(width, width, 3, padding=1), nn.ReLU(inplace=True))
+        self.out = nn.Conv2d(2 * width, out_channels - flow_channels, 3, padding=1)
 
-    def forward(self, corr: Tensor, disparity: Tensor) -> Tensor:
-        features = torch.cat([self.corr(corr), self.disp(disparity)], dim=1)
-        return torch.cat([torch.relu(self.out(features)), disparity], dim=1)
+    def forward(self, corr: Tensor, flow: Tensor) -> Tensor:
+        features = torch.cat([self.corr(corr), self.disp(flow)], dim=1)
+        return torch.cat([torch.relu(self.out(features)), flow], dim=1)
 
 
-def _pool2x(x: Tensor) -> Tensor:
+def pool2x(x: Tensor) -> Tensor:
+    """A finer GRU level's state at the next coarser level's resolution (RAFT's 3×3, stride-2 mean)."""
     return F.avg_pool2d(x, 3, stride=2, padding=1)
 
 
-def _resize_like(x: Tensor, like: Tensor) -> Tensor:
+def resize_like(x: Tensor, like: Tensor) -> Tensor:
+    """``x`` resized (bilinear, corners aligned, as RAFT) to ``like``'s height and width."""
     return F.interpolate(x, like.shape[2:], mode="bilinear", align_corners=True)
 
 
@@ -65,7 +68,7 @@ class MultiLevelUpdate(nn.Module):
     def __init__(self, hidden: Sequence[int], corr_channels: int, motion_dim: int, factor: int) -> None:
         super().__init__()
         h0, h1, h2 = hidden
-        self.motion = MotionEncoder(corr_channels, motion_dim)
+        self.motion = MotionEncoder(corr_channels, motion_dim, motion_dim)
         self.gru0 = ConvGRU(h0, motion_dim + h1)
         self.gru1 = ConvGRU(h1, h0 + h2)
         self.gru2 = ConvGRU(h2, h1)
@@ -75,8 +78,8 @@ class MultiLevelUpdate(nn.Module):
 
     def forward(self, net: list[Tensor], context: list[Sequence[Tensor]], corr: Tensor,
                 disparity: Tensor, *, with_mask: bool = True) -> tuple[list[Tensor], Tensor, Tensor | None]:
-        net2 = self.gru2(net[2], context[2], _pool2x(net[1]))
-        net1 = self.gru1(net[1], context[1], _pool2x(net[0]), _resize_like(net2, net[1]))
-        net0 = self.gru0(net[0], context[0], self.motion(corr, disparity), _resize_like(net1, net[0]))
+        net2 = self.gru2(net[2], context[2], pool2x(net[1]))
+        net1 = self.gru1(net[1], context[1], pool2x(net[0]), resize_like(net2, net[1]))
+        net0 = self.gru0(net[0], context[0], self.motion(corr, disparity), resize_like(net1, net[0]))
         mask = self.mask(net0) if with_mask else None
         return [net0, net1, net2], self.disp_head(net0), mask

@@ -1,8 +1,10 @@
 """The fusion model's budget (issue 10): the ``lite`` preset on one 1920×1080 pair, timed in a
 process of its own (peak resident memory from that child's ``getrusage``), beside OpenCV SGBM
-on the same pair in the same run; parameters per module; training steps/s at the lite crop.
+on the same pair in the same run and RAFT-Stereo's own network (the ``raft-stereo`` preset at its
+published sizes and 32 test iterations, what an imported checkpoint runs); parameters per module;
+training steps/s at the lite crop.
 
-The network is randomly initialised: speed and memory do not depend on the weights.
+The networks are randomly initialised: speed and memory do not depend on the weights.
 """
 
 from __future__ import annotations
@@ -42,8 +44,8 @@ def sgbm_seconds(left: np.ndarray, right: np.ndarray, repeats: int) -> float:
     return min(times)
 
 
-def _child(pair_file: str, repeats: int) -> None:
-    """Runs in the subprocess: lite inference on the saved pair, prints one JSON line."""
+def _child(pair_file: str, repeats: int, preset: str = "lite") -> None:
+    """Runs in the subprocess: ``preset``'s inference on the saved pair, prints one JSON line."""
     import resource
 
     import torch
@@ -53,7 +55,7 @@ def _child(pair_file: str, repeats: int) -> None:
     from model.presets import load_preset
 
     data = np.load(pair_file)
-    config = load_preset("lite")
+    config = load_preset(preset)
     torch.manual_seed(0)
     predictor = Predictor(FusionNetwork(config.model), config)
     times = []
@@ -62,7 +64,17 @@ def _child(pair_file: str, repeats: int) -> None:
         predictor.predict(data["left"], data["right"], data["mono"])
         times.append(time.perf_counter() - started)
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    print(json.dumps({"seconds": min(times), "peak_mb": peak_mb, "threads": torch.get_num_threads()}))
+    print(json.dumps({"seconds": min(times), "peak_mb": peak_mb, "threads": torch.get_num_threads(),
+                      "iters": config.train.test_iters}))
+
+
+def _timed(pair_file: Path, repeats: int, preset: str) -> dict[str, Any]:
+    """``preset`` on the pair in a process of its own: {"seconds", "peak_mb", "threads", "iters"}."""
+    code = f"from webapp.benchmarks.model import _child; _child({str(pair_file)!r}, {repeats}, {preset!r})"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        raise RuntimeError(f"the {preset} benchmark process failed: {done.stderr.strip().splitlines()[-1:]}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def parameters_per_module(overrides: dict[str, Any] | None = None) -> dict[str, int]:
@@ -106,23 +118,23 @@ def training_steps_per_s(steps: int) -> float:
     return steps / (time.perf_counter() - started)
 
 
-def run_model_bench(repeats: int = 2, train_steps: int = 3) -> dict[str, Any]:
-    """The JSON of ``illusion-studio bench model``."""
+def run_model_bench(repeats: int = 2, train_steps: int = 3, raft_stereo: bool = True) -> dict[str, Any]:
+    """The JSON of ``illusion-studio bench model``; ``raft_stereo``: also time RAFT-Stereo's network
+    (once: minutes on a 2-core CPU)."""
     left, right, mono = _pair(1920, 1080)
     with tempfile.TemporaryDirectory() as tmp:
         pair_file = Path(tmp) / "pair.npz"
         np.savez(pair_file, left=left, right=right, mono=mono)
-        code = f"from webapp.benchmarks.model import _child; _child({str(pair_file)!r}, {repeats})"
-        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
-    if done.returncode != 0:
-        raise RuntimeError(f"the lite benchmark process failed: {done.stderr.strip().splitlines()[-1:]}")
-    child = json.loads(done.stdout.strip().splitlines()[-1])
+        child = _timed(pair_file, repeats, "lite")
+        raft = _timed(pair_file, 1, "raft-stereo") if raft_stereo else None
     with open("/proc/loadavg") as handle:
         load = float(handle.read().split()[0])
     return {
         "lite_1080p_s": round(child["seconds"], 3),
         "lite_1080p_peak_mb": round(child["peak_mb"], 1),
         "sgbm_1080p_s": round(sgbm_seconds(left, right, repeats), 3),
+        **({"raft_stereo_1080p_s": round(raft["seconds"], 3), "raft_stereo_1080p_peak_mb": round(raft["peak_mb"], 1),
+            "raft_stereo_iters": raft["iters"]} if raft is not None else {}),
         "lite_budget_s": BUDGET_S,
         "lite_budget_mb": BUDGET_MB,
         "lite_within_budget": child["seconds"] <= BUDGET_S and child["peak_mb"] <= BUDGET_MB,

@@ -9,6 +9,7 @@ import click
 from dataset.settings import HOME_ENV
 from webapp.cli.bench import bench
 from webapp.cli.capture import import_capture, import_reconstruction
+from webapp.cli.checkpoints import import_checkpoint
 from webapp.cli.demo import demo
 from webapp.cli.evaluate import evaluate_cmd
 from webapp.cli.export import export_cmd, import_cmd
@@ -43,3 +44,4 @@ for command in (init, serve, worker, demo, synth, ingest, prefilter, frames, use
                 import_capture, import_reconstruction, export_cmd, import_cmd, train, runs, checkpoints, predict,
                 evaluate_cmd, media):
     main.add_command(command)
+checkpoints.add_command(import_checkpoint)  # the group lives with the runs commands

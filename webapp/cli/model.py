@@ -1,4 +1,4 @@
-"""``illusion-studio predict``: run a fusion-model checkpoint on one rectified stereo pair."""
+"""``illusion-studio predict``: run a checkpoint (fusion network or RAFT-Stereo's) on one rectified stereo pair."""
 
 from __future__ import annotations
 
@@ -9,7 +9,8 @@ import numpy as np
 
 from dataset.formats import FormatError, read_map, read_rgb, write_pfm, write_rgb
 from dataset.preview.images import add_colorbar, colorize, value_range
-from model.registry import current_checkpoint
+from model import registry
+from webapp.cli.errors import service_errors
 from webapp.cli.state import CliState, pass_state
 
 OUTPUTS = ("confidence", "stereo", "mono_align")
@@ -23,8 +24,9 @@ _NO_MONO = ("this model takes the left view's monocular disparity and none is at
 @click.command("predict")
 @click.argument("left", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.argument("right", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--checkpoint", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Model checkpoint (default: the workspace's current model).")
+@click.option("--checkpoint", default=None,
+              help="RUN:NAME (a run's best, last or checkpoint file, e.g. 3:best), imported:NAME, or a "
+                   "checkpoint file's path (default: the workspace's current model).")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="Disparity output (float32 PFM, pixels, left view).")
 @click.option("--mono", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
@@ -37,9 +39,10 @@ _NO_MONO = ("this model takes the left view's monocular disparity and none is at
 @click.option("--device", default="cpu", show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the confidence flow's noise.")
 @pass_state
-def predict(state: CliState, left: Path, right: Path, checkpoint: Path | None, out: Path, mono: Path | None,
+def predict(state: CliState, left: Path, right: Path, checkpoint: str | None, out: Path, mono: Path | None,
             preview: Path | None, outputs: str, iters: int | None, device: str, seed: int) -> None:
-    """Fused disparity of the LEFT/RIGHT rectified pair; extra outputs go beside --out as <stem>_<output>.pfm."""
+    """Disparity of the LEFT/RIGHT rectified pair (fused, or a stereo-only network's such as an imported
+    RAFT-Stereo); extra outputs go beside --out as <stem>_<output>.pfm."""
     extras = [name.strip().replace("-", "_") for name in outputs.split(",") if name.strip()]
     unknown = [name for name in extras if name not in OUTPUTS]
     if unknown:
@@ -48,9 +51,11 @@ def predict(state: CliState, left: Path, right: Path, checkpoint: Path | None, o
     if out.suffix.lower() != ".pfm":
         raise click.BadParameter("must end in .pfm", param_hint="--out")
     if checkpoint is None:
-        checkpoint = current_checkpoint(state.settings)
-        if checkpoint is None:
+        path = registry.current_checkpoint(state.settings)
+        if path is None:
             raise click.ClickException(_NO_MODEL)
+    else:
+        path = _checkpoint_path(state, checkpoint)
     try:
         left_rgb, right_rgb = read_rgb(left), read_rgb(right)
         # a relative disparity: the PNG encoding's scale does not matter, it is affine-invariant
@@ -61,8 +66,9 @@ def predict(state: CliState, left: Path, right: Path, checkpoint: Path | None, o
     from model.predictor import Predictor
 
     try:
-        network, config, _ = load_network(checkpoint, device)
-        if mono_map is None and config.model.mono_backend == "precomputed":
+        network, config, _ = load_network(path, device, label=checkpoint)
+        # A stereo-only network (RAFT-Stereo's, or use_mono off) reads no mono disparity.
+        if mono_map is None and config.model.use_mono and config.model.mono_backend == "precomputed":
             mono_map = _estimate_mono(state, left_rgb, device)
         result = Predictor(network, config, device).predict(left_rgb, right_rgb, mono_map, iters=iters, seed=seed)
     except ValueError as exc:
@@ -80,6 +86,13 @@ def predict(state: CliState, left: Path, right: Path, checkpoint: Path | None, o
         write_rgb(preview, _preview(result.disparity))
     click.echo(f"wrote {out} ({result.disparity.shape[1]}×{result.disparity.shape[0]}, "
                f"disparity {np.nanmin(result.disparity):.2f}–{np.nanmax(result.disparity):.2f} px)")
+
+
+def _checkpoint_path(state: CliState, text: str) -> Path:
+    """The file ``--checkpoint`` names: a checkpoint name (which needs the workspace) or a path."""
+    settings = state.settings if registry.is_name(text) else None
+    with service_errors():
+        return registry.resolve(settings, text, allow_path=True).path
 
 
 def _estimate_mono(state: CliState, left: np.ndarray, device: str) -> np.ndarray:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -14,7 +15,9 @@ from dataset.db import transaction
 from dataset.models import IllusionType
 from dataset.services import training
 from model import registry
-from model.launch import RunLaunch, validate
+from model.launch import RunLaunch, backbone_dirs, validate
+from model.launcher import engine_options
+from model.presets import load_preset
 from webapp.cli.errors import service_errors
 from webapp.cli.state import CliState, pass_state
 from webapp.jobs import runs as run_control
@@ -22,13 +25,35 @@ from webapp.jobs import runs as run_control
 NO_WORKER_HINT_S = 15.0
 
 
+class WholeNumber(click.ParamType):
+    """A whole number of at least 1, also written like ``2e3``; its upper bound is the launch schema's,
+    so ``--steps 1e12`` is told the schema's limit rather than that it is no integer."""
+
+    name = "whole number"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> int:
+        if isinstance(value, int):
+            number = float(value)
+        else:
+            try:
+                number = float(str(value).strip())
+            except ValueError:
+                self.fail(f"{value!r} is not a whole number", param, ctx)
+        if not number.is_integer() or number < 1:
+            self.fail(f"{value!r} is not a whole number of at least 1", param, ctx)
+        return int(number)
+
+
+WHOLE = WholeNumber()
+
+
 @click.command()
 @click.option("--preset", default="lite", show_default=True, type=click.Choice(["lite", "paper"]))
-@click.option("--steps", type=click.IntRange(1), help="Training steps (preset's by default).")
-@click.option("--batch", type=click.IntRange(1), help="Global batch size.")
+@click.option("--steps", type=WHOLE, help="Training steps (preset's by default).")
+@click.option("--batch", type=WHOLE, help="Global batch size.")
 @click.option("--lr", type=click.FloatRange(min=0, min_open=True), help="Peak learning rate (OneCycle).")
 @click.option("--crop", help="Random crop HxW in pixels, e.g. 320x736.")
-@click.option("--iters", type=click.IntRange(1), help="GRU iterations in training.")
+@click.option("--iters", type=WHOLE, help="GRU iterations in training.")
 @click.option("--devices", default="auto", show_default=True, help="auto, cpu, cuda, or cuda:0,1 (GPUs to use).")
 @click.option("--nproc", default=1, show_default=True, type=click.IntRange(1),
               help="Trainer processes on this machine (DDP: gloo on CPU, NCCL on CUDA).")
@@ -75,17 +100,20 @@ def train(state: CliState, preset: str, steps: int | None, batch: int | None, lr
                f"(`illusion-studio --data-dir {state.settings.home} worker --queue train` runs it)", err=True)
     if nnodes > 1:
         click.echo("on each other node, once this one runs it:\n  " + other_node_command(
-            training.run_dir(state.settings.runs_dir, run_id), nproc, nnodes, rdzv_endpoint or ""), err=True)
+            training.run_dir(state.settings.runs_dir, run_id), nproc, nnodes, rdzv_endpoint or "",
+            backbone_dirs(load_preset(preset), state.settings)), err=True)
     data = _wait(state, run_id) if wait else _show(state, run_id)
     _print(data, as_json)
     if wait and data["state"] != "succeeded":
         raise click.ClickException(f"run {run_id} {data['state']}: {data['reason']}")
 
 
-def other_node_command(directory: Path, nproc: int, nnodes: int, endpoint: str) -> str:
-    """What the other machines of a multi-node run start (the run directory on shared storage)."""
-    return (f"python -m torch.distributed.run --nnodes {nnodes} --nproc-per-node {nproc} --rdzv-backend c10d "
-            f"--rdzv-endpoint {endpoint} --rdzv-id run-{directory.name} -m model.train {directory}")
+def other_node_command(directory: Path, nproc: int, nnodes: int, endpoint: str, backbones: dict[str, str]) -> str:
+    """What the other machines of a multi-node run start (the run directory on shared storage;
+    ``backbones``: the frozen backbones' directories, as this machine's settings name them)."""
+    return shlex.join(["python", "-m", "torch.distributed.run", "--nnodes", str(nnodes), "--nproc-per-node", str(nproc),
+                       "--rdzv-backend", "c10d", "--rdzv-endpoint", endpoint, "--rdzv-id", f"run-{directory.name}",
+                       "-m", "model.train", str(directory), *engine_options(backbones)])
 
 
 def _show(state: CliState, run_id: int, *, full: bool = False) -> dict[str, Any]:
@@ -135,7 +163,8 @@ def list_runs(state: CliState, as_json: bool) -> None:
     rt = state.runtime
     current = registry.current_model(rt.settings)
     with rt.sessions() as s:
-        rows = [training.run_json(r, rt.settings.runs_dir, current=current) for r in training.list_runs(s)]
+        rows = [registry.with_checkpoint_names(training.run_json(r, rt.settings.runs_dir, current=current))
+                for r in training.list_runs(s)]
     if as_json:
         click.echo(json.dumps(rows, indent=2))
         return

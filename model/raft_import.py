@@ -1,0 +1,229 @@
+"""RAFT-Stereo's published checkpoints (princeton-vl/RAFT-Stereo, MIT: ``raftstereo-sceneflow``,
+``-middlebury``, ``-eth3d``, ``-realtime``, ``iraftstereo_rvc``) as checkpoints of the ``raft-stereo``
+network: read weights-only, the architecture inferred from the tensors, every key mapped.
+
+What the tensors fix: ``n_downsample`` (the mask head's 9·f² rows), the GRU levels (one
+``context_zqr_convs`` per level), their width, a shared backbone (no ``fnet``; ``conv2`` on the
+context trunk) and a batch-norm context encoder (running statistics). What they do not fix comes
+from the flags RAFT-Stereo's README gives its files (:data:`PUBLISHED`): a context encoder without
+norm tensors is instance-normed (iraftstereo_rvc), a shared backbone with 2 levels runs the
+slow–fast GRU schedule (realtime). Convex upsampling pads with zeros, as RAFT-Stereo does.
+
+Two kinds of the file's tensors have no place of their own: RAFT-Stereo's residual blocks hold their
+shortcut's norm twice (``norm3`` and ``downsample.1``, one module), and with fewer than 3 GRU levels
+its coarsest GRU and context stage exist but never run (``gru32``, ``layer5``, ``outputs32``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import Tensor
+
+from model.network import FusionNetwork
+from model.presets import Config, load_preset
+
+SOURCE = "raft-stereo"
+PREFIX = "stereo_branch."  # where the network keeps the RAFT-Stereo branch
+# The published files' documented flags, by what their tensors show: (shared backbone, GRU levels,
+# n_downsample, the context encoder's norm tensors: "batch" running statistics, "affine" scales
+# alone, "none") → (files, context_norm, slow_fast_gru).
+PUBLISHED: dict[tuple[bool, int, int, str], tuple[str, str, bool]] = {
+    (False, 3, 2, "batch"): ("raftstereo-sceneflow, raftstereo-middlebury, raftstereo-eth3d", "batch", False),
+    (True, 2, 3, "batch"): ("raftstereo-realtime", "batch", True),
+    (False, 3, 2, "none"): ("iraftstereo_rvc", "instance", False),
+}
+# Other layouts follow the same rules: norm tensors name the norm (no tensors: instance, as
+# iraftstereo_rvc), a shared backbone with 2 levels runs slow–fast (as raftstereo-realtime).
+_NORM_RULE = {"batch": "batch", "affine": "group", "none": "instance"}
+CORR_LEVELS, CORR_RADIUS = 4, 4  # every published file's (the motion encoder's 36 correlation planes)
+
+
+def _prefixes() -> list[tuple[str, str]]:
+    """(RAFT-Stereo's key prefix, this network's), longest first: module for module the same layout."""
+    pairs = [("fnet.conv1.", "features.stem.0."), ("fnet.norm1.", "features.stem.1."), ("fnet.conv2.", "features.out."),
+             ("cnet.conv1.", "cnet.trunk.stem.0."), ("cnet.norm1.", "cnet.trunk.stem.1."),
+             ("conv2.", "match_head."), ("context_zqr_convs.", "zqr."),
+             ("update_block.flow_head.conv1.", "update.flow_head.0."),
+             ("update_block.flow_head.conv2.", "update.flow_head.2."), ("update_block.mask.", "update.mask.net.")]
+    for encoder, ours in (("fnet", "features"), ("cnet", "cnet.trunk")):
+        pairs += [(f"{encoder}.layer{stage}.{block}.", f"{ours}.layers.{2 * (stage - 1) + block}.")
+                  for stage in (1, 2, 3) for block in (0, 1)]
+    pairs += [(f"cnet.layer{stage}.", f"cnet.down.{stage - 4}.") for stage in (4, 5)]
+    for level, resolution in enumerate(("08", "16", "32")):
+        pairs += [(f"cnet.outputs{resolution}.{head}.", f"cnet.{('hidden', 'context')[head]}.{level}.") for head in (0, 1)]
+        pairs.append((f"update_block.gru{resolution}.", f"update.grus.{level}."))
+    pairs += [(f"update_block.encoder.{theirs}.", f"update.motion.{ours}.") for theirs, ours in
+              (("convc1", "corr.0"), ("convc2", "corr.2"), ("convf1", "disp.0"), ("convf2", "disp.2"), ("conv", "out"))]
+    return sorted(pairs, key=lambda pair: -len(pair[0]))
+
+
+_PREFIXES = _prefixes()
+# Per GRU level: its GRU, its context heads and the context stage that leads to it.
+_LEVELLED = re.compile(r"update\.grus\.(\d)\.|cnet\.(?:hidden|context)\.(\d)\.|cnet\.down\.(\d)\.")
+_DUPLICATE = re.compile(r"\.norm3\.")
+
+
+def to_ours(key: str) -> str | None:
+    """This network's key (under the branch) for a RAFT-Stereo key, or None for one it has no place for.
+    Inside residual blocks RAFT-Stereo's ``downsample`` is the shortcut, ``skip`` here."""
+    for theirs, ours in _PREFIXES:
+        if key.startswith(theirs):
+            return ours + key[len(theirs):].replace("downsample.", "skip.")
+    return None
+
+
+def _never_run(key: str, levels: int) -> bool:
+    """Whether this network's ``key`` belongs to a GRU level beyond ``levels``: RAFT-Stereo builds all
+    three whatever its n_gru_layers, and never runs the others."""
+    match = _LEVELLED.match(key)
+    if match is None:
+        return False
+    gru, head, stage = match.groups()
+    return int(gru or head or int(stage) + 1) >= levels
+
+
+def to_theirs(key: str) -> str:
+    """The RAFT-Stereo key for this network's key (under the branch): what a file lacks, in its terms."""
+    for theirs, ours in sorted(_PREFIXES, key=lambda pair: -len(pair[1])):
+        if key.startswith(ours):
+            return theirs + key[len(ours):].replace("skip.", "downsample.")
+    return key
+
+
+class NotRaftStereo(ValueError):
+    """A file that is none of RAFT-Stereo's checkpoints (the message says what is missing or unknown)."""
+
+
+@dataclass(frozen=True)
+class Conversion:
+    config: Config
+    network: FusionNetwork  # the raft-stereo network with every tensor from the file, eval mode
+    architecture: dict[str, Any]
+    tensors_in_file: int
+    duplicates: int  # norm3 tensors, the same module as their block's downsample.1
+    unused: list[str]  # the file's keys RAFT-Stereo's own forward never reads at this architecture
+
+
+def strip_module(state: Mapping[str, Any]) -> dict[str, Any]:
+    """Keys without DataParallel's ``module.`` (every published file has it)."""
+    return {key.removeprefix("module."): value for key, value in state.items()}
+
+
+def infer_architecture(state: Mapping[str, Tensor]) -> dict[str, Any]:
+    """The ``raft-stereo`` network's options for a RAFT-Stereo state dict (``module.`` stripped):
+    ``{"n_downsample", "gru_levels", "hidden", "shared_backbone", "context_norm", "slow_fast_gru",
+    "corr_levels", "corr_radius", "feature_dim", "published"}``. NotRaftStereo naming what is missing."""
+    required = ["update_block.mask.2.weight", "context_zqr_convs.0.weight", "cnet.conv1.weight",
+                "update_block.encoder.convc1.weight"]
+    missing = [key for key in required if key not in state]
+    if missing:
+        raise NotRaftStereo(f"not a RAFT-Stereo checkpoint: no {', '.join(missing)} "
+                            f"(it has {len(state)} tensors{', e.g. ' + next(iter(state)) if state else ''})")
+    rows = state["update_block.mask.2.weight"].shape[0]
+    factor = round((rows / 9) ** 0.5)
+    if 9 * factor * factor != rows or factor not in (4, 8):
+        raise NotRaftStereo(f"update_block.mask.2.weight has {rows} rows: not 9·f² for n_downsample 2 (144) or 3 (576)")
+    levels = sum(1 for key in state if re.fullmatch(r"context_zqr_convs\.\d\.weight", key))
+    if levels not in (1, 2, 3):
+        raise NotRaftStereo(f"{levels} context_zqr_convs: RAFT-Stereo has 1 to 3 GRU levels")
+    hidden = {state[f"context_zqr_convs.{i}.weight"].shape[0] // 3 for i in range(levels)}
+    if len(hidden) != 1:
+        raise NotRaftStereo(f"GRU levels of different widths ({sorted(hidden)}): not a layout RAFT-Stereo publishes")
+    shared = not any(key.startswith("fnet.") for key in state)
+    if shared and "conv2.1.weight" not in state:
+        raise NotRaftStereo("no fnet and no conv2 (the shared backbone's matching head): not a RAFT-Stereo checkpoint")
+    planes = state["update_block.encoder.convc1.weight"].shape[1]
+    if planes != CORR_LEVELS * (2 * CORR_RADIUS + 1):
+        raise NotRaftStereo(f"the motion encoder reads {planes} correlation planes, not RAFT-Stereo's "
+                            f"{CORR_LEVELS} levels × (2·{CORR_RADIUS}+1)")
+    tensors = ("batch" if "cnet.norm1.running_mean" in state else "affine" if "cnet.norm1.weight" in state
+               else "none")
+    n_downsample = 2 if factor == 4 else 3
+    files, norm, slow_fast = PUBLISHED.get((shared, levels, n_downsample, tensors),
+                                           (None, _NORM_RULE[tensors], shared and levels == 2))
+    feature_dim = state["conv2.1.weight" if shared else "fnet.conv2.weight"].shape[0]
+    return {"n_downsample": n_downsample, "gru_levels": levels, "hidden": hidden.pop(), "shared_backbone": shared,
+            "context_norm": norm, "slow_fast_gru": slow_fast, "corr_levels": CORR_LEVELS, "corr_radius": CORR_RADIUS,
+            "feature_dim": feature_dim, "published": files}
+
+
+def convert(state: Mapping[str, Any]) -> Conversion:
+    """A RAFT-Stereo state dict (as loaded; ``module.`` optional) → the ``raft-stereo`` network's
+    config and state. NotRaftStereo naming what is missing, unknown or of the wrong shape."""
+    state = strip_module(state)
+    not_tensors = [key for key, value in state.items() if not isinstance(value, torch.Tensor)]
+    if not_tensors:
+        raise NotRaftStereo(f"not a state dict of tensors: {not_tensors[0]} is a {type(state[not_tensors[0]]).__name__}")
+    arch = infer_architecture(state)
+    config = load_preset(SOURCE, {
+        "n_downsample": arch["n_downsample"], "gru_levels": arch["gru_levels"],
+        "hidden_dims": [arch["hidden"]] * 3, "shared_backbone": arch["shared_backbone"],
+        "context_norm": arch["context_norm"], "slow_fast_gru": arch["slow_fast_gru"], "feature_dim": arch["feature_dim"],
+        "corr_levels": arch["corr_levels"], "corr_radius": arch["corr_radius"], "upsample_border": "zeros",
+        "amp": False})  # as its demo: float32
+    network = FusionNetwork(config.model)
+    expected = network.state_dict()
+    mapped: dict[str, Tensor] = {}
+    unknown, unused, duplicates = [], [], 0
+    for key, tensor in state.items():
+        if _DUPLICATE.search(key) and _DUPLICATE.sub(".downsample.1.", key) in state:
+            duplicates += 1
+            continue
+        target = to_ours(key)
+        if target is not None and PREFIX + target in expected:
+            mapped[PREFIX + target] = tensor
+        elif target is not None and _never_run(target, arch["gru_levels"]):
+            unused.append(key)
+        else:
+            unknown.append(key)
+    missing = [to_theirs(key.removeprefix(PREFIX)) for key in expected if key not in mapped]
+    if unknown or missing:
+        parts = ([f"unknown {_few(unknown)}"] if unknown else []) + ([f"missing {_few(missing)}"] if missing else [])
+        raise NotRaftStereo(f"not the RAFT-Stereo layout its tensors suggest: {'; '.join(parts)}")
+    for key, tensor in mapped.items():
+        theirs = to_theirs(key.removeprefix(PREFIX))
+        if tuple(tensor.shape) != tuple(expected[key].shape):
+            raise NotRaftStereo(f"{theirs} has shape {tuple(tensor.shape)}, expected {tuple(expected[key].shape)}")
+        if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all()):
+            raise NotRaftStereo(f"{theirs} holds values that are not finite")
+    network.load_state_dict(mapped, strict=True)
+    return Conversion(config, network.eval(), arch, len(state), duplicates, unused)
+
+
+def _few(keys: list[str]) -> str:
+    shown = ", ".join(keys[:3])
+    return shown + (f" and {len(keys) - 3} more" if len(keys) > 3 else "")
+
+
+def read_published(path: Path) -> dict[str, Any]:
+    """A published file's state dict, loaded weights-only (a pickle naming code is refused)."""
+    from model.checkpoint import read_weights_only
+
+    state = read_weights_only(Path(path), Path(path).name)
+    if not isinstance(state, Mapping):
+        raise NotRaftStereo(f"{Path(path).name} holds a {type(state).__name__}, not a state dict")
+    return dict(state)
+
+
+def import_file(path: Path, destination: Path) -> dict[str, Any]:
+    """Convert the published file ``path`` and write it, as a checkpoint of this project's format, to
+    ``destination`` (atomically). Returns ``{"architecture", "keys_loaded", "tensors_in_file",
+    "duplicates", "unused"}``."""
+    from model.checkpoint import save_checkpoint
+
+    conversion = convert(read_published(path))
+    digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    source = {"from": SOURCE, "file": Path(path).name, "sha256": digest, "architecture": conversion.architecture,
+              "imported_at": datetime.now(UTC).isoformat(timespec="seconds")}
+    save_checkpoint(destination, conversion.network, conversion.config, step=0, source=source)
+    return {"architecture": conversion.architecture, "keys_loaded": len(conversion.network.state_dict()),
+            "tensors_in_file": conversion.tensors_in_file, "duplicates": conversion.duplicates,
+            "unused": conversion.unused}

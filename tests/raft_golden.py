@@ -1,0 +1,77 @@
+"""Full-width weights in the layout of RAFT-Stereo's published checkpoints, regenerated from a seed.
+
+RAFT-Stereo's widths are fixed (hidden 128, features 256, …), so its golden fixtures
+(tests/fixtures/raft_stereo/) store a key/shape list and a seed rather than megabytes of weights;
+:func:`raft_state` turns them back into the state dict the fixtures' reference outputs were computed
+with. Scales keep 32 GRU iterations finite and tame: convolutions kaiming-like (std √(1/fan-in)),
+the flow head's output smaller, small biases, batch-norm affines near 1/0 and running statistics near 0/1. RAFT-Stereo's
+``norm3`` is the same module as ``downsample.1`` in its residual blocks, so the two share values.
+
+Only torch is needed: the project holds none of RAFT-Stereo's code.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+FIXTURES = Path(__file__).parent / "fixtures" / "raft_stereo"
+# The flow head's last layer, scaled down: 32 updates of unit scale carry the disparity off the
+# image, where the correlation lookup reads only zeros and would go untested.
+HEAD_GAIN = 0.1
+
+
+def _canonical(name: str) -> str:
+    return name.replace(".norm3.", ".downsample.1.")
+
+
+def raft_state(keys: Sequence[tuple[str, Sequence[int]]], seed: int) -> dict[str, torch.Tensor]:
+    """The state dict for ``keys`` ((name, shape) in file order) and ``seed``."""
+    generator = torch.Generator().manual_seed(seed)
+    values: dict[str, torch.Tensor] = {}
+
+    def normal(shape: Sequence[int], std: float, mean: float = 0.0) -> torch.Tensor:
+        return mean + std * torch.randn(tuple(shape), generator=generator, dtype=torch.float32)
+
+    state = {}
+    for name, shape in keys:
+        canonical = _canonical(name)
+        if canonical not in values:
+            leaf = canonical.rsplit(".", 1)[-1]
+            if leaf == "num_batches_tracked":
+                value = torch.tensor(0, dtype=torch.int64)
+            elif leaf == "running_mean":
+                value = normal(shape, 0.1)
+            elif leaf == "running_var":
+                value = 1.0 + 0.2 * torch.rand(tuple(shape), generator=generator)
+            elif len(shape) == 4:
+                fan_in = shape[1] * shape[2] * shape[3]
+                gain = HEAD_GAIN if ".flow_head.conv2." in canonical else 1.0
+                value = normal(shape, gain * (1.0 / fan_in) ** 0.5)
+            elif leaf == "weight":  # a norm's affine scale
+                value = normal(shape, 0.1, 1.0)
+            else:
+                value = normal(shape, 0.02)
+            values[canonical] = value
+        state[name] = values[canonical].clone()
+    return state
+
+
+def load_fixture(name: str) -> dict[str, Any]:
+    """One architecture's fixture: its JSON (flags, seed, keys, iterations) with the npz arrays
+    (``left``, ``right`` uint8 H×W×3, ``disparity`` float32 H×W, the reference's output) added."""
+    with open(FIXTURES / f"{name}.json", encoding="utf-8") as handle:
+        fixture = json.load(handle)
+    with np.load(FIXTURES / f"{name}.npz") as arrays:
+        fixture.update({key: arrays[key] for key in arrays.files})
+    return fixture
+
+
+def fixture_state(fixture: dict[str, Any]) -> dict[str, torch.Tensor]:
+    """The fixture's weights, keys as in a published file (``module.`` prefixed)."""
+    return raft_state([(key, shape) for key, shape in fixture["keys"]], fixture["seed"])
