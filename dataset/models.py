@@ -331,6 +331,8 @@ class Job(Base):
     error: Mapped[str | None] = mapped_column(Text)
     log: Mapped[str] = mapped_column(Text, default="")
     attempts: Mapped[int] = mapped_column(default=0)
+    ran_s: Mapped[float] = mapped_column(default=0.0, server_default="0",
+                                         doc="Seconds its attempts before the current one ran (a retry adds the last).")
     worker: Mapped[str | None] = mapped_column(String(128), doc="host:pid of the worker running it.")
     created_by_id: Mapped[int | None] = mapped_column(ForeignKey("users.id", ondelete="SET NULL"))
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
@@ -339,6 +341,8 @@ class Job(Base):
     heartbeat_at: Mapped[datetime | None]
 
     created_by: Mapped[User | None] = relationship()
+    # The run a train job trains (its row points here): what the job's answer says of a cancelled run.
+    training_run: Mapped[TrainingRun | None] = relationship(viewonly=True, uselist=False)
 
 
 class RunState(enum.StrEnum):

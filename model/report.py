@@ -71,12 +71,13 @@ def picture_caption(path: str) -> str:
 
 
 def ranked_samples(report: dict[str, Any], method: str, region: str = "all", count: int = 3) -> tuple[list[str], list[str]]:
-    """The ``count`` worst and best samples of ``method`` by EPE on ``region``."""
+    """The worst samples of ``method`` by EPE on ``region`` (the worst first) and the best (the best
+    first), at most ``count`` of each. No sample is in both: of n < 2·count samples the worse ⌈n/2⌉
+    are the worst and the others the best (none for a single sample)."""
     rows = [(r["regions"].get(region, {}).get("epe", math.nan), r["sample"]) for r in report["methods"][method]["per_sample"]]
-    rows = sorted((e, s) for e, s in rows if math.isfinite(e))
-    best = [s for _, s in rows[:count]]
-    worst = [s for _, s in reversed(rows[-count:])]
-    return worst, best
+    ranked = [s for _, s in sorted(((e, s) for e, s in rows if math.isfinite(e)), reverse=True)]
+    worst = min(count, math.ceil(len(ranked) / 2))
+    return ranked[:worst], ranked[worst:][::-1][:count]
 
 
 def write_pictures(out_dir: Path, sample: StereoSample, predictions: dict[str, np.ndarray]) -> list[str]:

@@ -21,7 +21,7 @@ from dataset.services import audit, proposals
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.frames import get_frame, update_frame
 from dataset.services.leases import ensure_annotation_row, held_by_other, release_lease, renew_lease
-from dataset.services.sample_review import returned_note
+from dataset.services.sample_review import returned_note, returned_waiting
 from dataset.services.validate import DB_INT_MAX, db_int, shown
 
 ANNOTATABLE = (FrameState.approved,)
@@ -111,6 +111,8 @@ def frame_detail(session: Session, frame_id: int, user: User | Any) -> dict[str,
                   "held_by_other": held,
                   "expires": ann.lease_expires_at.isoformat() + "Z" if ann and ann.lease_expires_at else None},
         "returned": returned_note(session, frame),
+        # Frames sent back to this annotator meanwhile: the page names them while another frame is on it.
+        "returned_waiting": returned_waiting(session, user, other_than=frame.id),
         "prev_id": ids[pos - 1] if pos > 0 else None,
         "next_id": ids[pos + 1] if 0 <= pos < len(ids) - 1 else None,
     }

@@ -21,7 +21,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from dataset.db import transaction
 from dataset.media import MediaStore
-from dataset.models import Job, JobState, User, utcnow
+from dataset.models import Job, JobState, RunState, User, utcnow
 from dataset.redact import redactor_for, shown
 from dataset.services.errors import Conflict, NotFound, ServiceError
 from dataset.settings import Settings
@@ -67,13 +67,16 @@ def user_error(exc: BaseException, redact: Callable[[str], str]) -> str:
 def job_json(job: Job, *, with_log: bool = False) -> dict[str, Any]:
     """What answers say of a job. Its parameters and result (a command line's paths), its error and
     its log (tracebacks, a trainer's output) come from outside the app's own answers: shown through
-    :func:`dataset.redact.shown`, which keeps server paths out of a request's answer."""
+    :func:`dataset.redact.shown`, which keeps server paths out of a request's answer.
+
+    ``state`` is the row's, except ``cancelled`` for the ended train job of a cancelled run (the row
+    says failed: the handler raised); ``took_s``: the seconds every attempt ran, once it has ended."""
     data: dict[str, Any] = {
-        "id": job.id, "kind": job.kind, "state": job.state.value, "progress": job.progress,
+        "id": job.id, "kind": job.kind, "state": _state(job), "progress": job.progress,
         "params": shown(job.params), "result": shown(job.result), "error": shown(job.error), "attempts": job.attempts,
         "worker": job.worker, "created_by": job.created_by.name if job.created_by else None,
         "created_at": _iso(job.created_at), "started_at": _iso(job.started_at),
-        "finished_at": _iso(job.finished_at),
+        "finished_at": _iso(job.finished_at), "took_s": _took_s(job),
     }
     if with_log:
         data["log"] = shown(job.log)
@@ -84,12 +87,29 @@ def _iso(value: Any) -> str | None:
     return value.isoformat() + "Z" if value is not None else None
 
 
+def _state(job: Job) -> str:
+    """The job's state as people read it: a cancel is a person's decision, not a failure."""
+    run = job.training_run if job.kind == "train" and job.state == JobState.failed else None
+    return "cancelled" if run is not None and run.state == RunState.cancelled else job.state.value
+
+
+def _took_s(job: Job) -> float | None:
+    """Seconds the job ran over all its attempts once it has ended; None before, or when it never ran."""
+    if not job.state.finished:
+        return None
+    last = (job.finished_at - job.started_at).total_seconds() if job.started_at and job.finished_at else 0.0
+    return round((job.ran_s or 0.0) + last, 1) if job.ran_s or job.started_at else None
+
+
 def mark_for_retry(session: Session, job_id: int) -> Job:
     """Put a failed or interrupted job back in the queued state (the caller enqueues it)."""
     job = get_job(session, job_id)
     if job.state not in (JobState.failed, JobState.interrupted):
         raise Conflict(f"job {job_id} is {job.state.value}; only failed or interrupted jobs can be retried")
+    if job.started_at is not None and job.finished_at is not None:  # the attempt that ended counts in "took"
+        job.ran_s += max(0.0, (job.finished_at - job.started_at).total_seconds())
     job.state, job.error, job.progress, job.worker, job.finished_at = JobState.queued, None, 0.0, None, None
+    job.started_at = None  # the next attempt's, when a worker claims it
     return job
 
 

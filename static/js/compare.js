@@ -18,16 +18,35 @@ const ROWS = [["all", "epe", "EPE all (px)"], ["all", "bad2", "bad-2 all (%)"], 
 let done = false;
 
 const version = (r) => r.dataset.id.slice(0, 12);
+// How a run split its dataset version: its seed and fractions decide which videos validate it.
+const split = (r) => {
+  const fractions = Object.entries(r.launch?.split ?? {}).map(([name, f]) => `${name} ${f}`).join(" / ");
+  return `seed ${r.launch?.seed ?? 0}${fractions ? `, ${fractions}` : ""}`;
+};
 
-// Runs of different dataset versions were validated on different samples: say so above the figures.
-function versionWarning(runs) {
-  const versions = new Map();
-  for (const r of runs) versions.set(r.dataset.id, [...(versions.get(r.dataset.id) ?? []), r.run]);
+// The runs by `key`: key → "run 1, run 3".
+function grouped(runs, key) {
+  const groups = new Map();
+  for (const r of runs) groups.set(key(r), [...(groups.get(key(r)) ?? []), `run ${r.run}`]);
+  return groups;
+}
+
+// Runs of different dataset versions, or of one version split with different seeds or fractions, were
+// validated on different samples: say so above the figures.
+function samplesWarning(runs) {
+  const versions = grouped(runs, (r) => r.dataset.id);
+  const splits = grouped(runs, split);
   const line = document.getElementById("compare-versions");
-  line.hidden = versions.size < 2;
-  line.textContent = versions.size < 2 ? "" : `These runs were trained on ${versions.size} different dataset versions (`
-    + [...versions.entries()].map(([id, ids]) => `${ids.map((i) => `run ${i}`).join(", ")}: ${id.slice(0, 12)}`).join("; ")
-    + "), so their validation figures are measured on different samples: compare them with care.";
+  const caution = "so their validation figures are measured on different samples: compare them with care.";
+  const list = (groups, label) => [...groups.entries()].map(([key, names]) => `${names.join(", ")}: ${label(key)}`).join("; ");
+  if (versions.size > 1) {
+    line.textContent = `These runs were trained on ${versions.size} different dataset versions (`
+      + `${list(versions, (id) => id.slice(0, 12))}), ${caution}`;
+  } else if (splits.size > 1) {
+    line.textContent = `These runs share dataset version ${version(runs[0])} but split it differently (`
+      + `${list(splits, (key) => key)}): the split follows the seed, ${caution}`;
+  }
+  line.hidden = versions.size < 2 && splits.size < 2;
 }
 
 function table(runs) {
@@ -38,6 +57,8 @@ function table(runs) {
     el("tr", { className: differ ? "differs" : "" }, el("th", {}, "dataset version"), ...runs.map((r) => el("td", {
       dataset: { run: r.run, version: r.dataset.id }, title: r.dataset.id },
       el("code", {}, version(r)), ` (${plural(r.dataset.samples, "sample")}, ${plural(r.dataset.splits?.val ?? 0, "validation sample")})`))),
+    el("tr", { className: new Set(runs.map(split)).size > 1 ? "differs" : "" }, el("th", {}, "split"),
+      ...runs.map((r) => el("td", { dataset: { run: r.run } }, split(r)))),
     el("tr", {}, el("th", {}, "validation step"), ...runs.map((r) => el("td", {}, String(r.last_val?.step ?? "—")))),
     ...ROWS.map(([region, key, label]) => el("tr", {}, el("th", {}, label),
       ...runs.map((r) => el("td", { dataset: { run: r.run } }, fixed(r.last_val?.metrics?.[region]?.[key], key === "epe" ? 3 : 2))))),
@@ -57,7 +78,7 @@ async function refresh() {
   loss.update(series((p) => p.step.filter((s) => s.loss != null).map((s) => [s.step, s.loss])));
   epe.update(series((p) => p.val.filter((v) => v.metrics?.all?.epe != null).map((v) => [v.step, v.metrics.all.epe])));
   table(runs);
-  versionWarning(runs);
+  samplesWarning(runs);
   done = runs.every((r) => !LIVE.has(r.state));
 }
 
@@ -70,6 +91,7 @@ document.addEventListener("keydown", (event) => {
 });
 keyboardHelp([["`1`–`9`", "open the page of the 1st–9th run of the table"]],
              { note: "Each run keeps its colour on both charts. The page updates by itself while a run goes. "
-                     + "Runs trained on different dataset versions get a warning: their validation samples differ. "
+                     + "Runs trained on different dataset versions, or on one split with different seeds or "
+                     + "fractions, get a warning: their validation samples differ. "
                      + "To change the runs, tick others on the Models page." });
 poll(refresh, 3000);

@@ -9,12 +9,14 @@ export function choose(dialog) {
   return new Promise((resolve) => dialog.addEventListener("close", () => resolve(dialog.returnValue), { once: true }));
 }
 
-// While `dialog` is open, the key a button names in `data-key` chooses that button. The listener
-// captures, so it runs before the pages' shortcut handlers, which pass over a key taken here
-// (defaultPrevented) even though the dialog has closed by the time they see it.
+// While `dialog` is open, the key a button names in `data-key` chooses that button, unless it is
+// typed into one of the dialog's fields. The listener captures, so it runs before the pages'
+// shortcut handlers, which pass over a key taken here (defaultPrevented) even though the dialog has
+// closed by the time they see it.
 export function keyChoices(dialog) {
   document.addEventListener("keydown", (event) => {
     if (!dialog.open || event.key.length !== 1 || browserKey(event)) return;
+    if (event.target.closest?.("input, textarea, select")) return;
     const button = dialog.querySelector(`button[data-key="${CSS.escape(event.key)}"]`);
     if (!button) return;
     event.preventDefault();
@@ -28,6 +30,20 @@ export function reasonPicker(dialog) {
   return (label) => {
     dialog.querySelector("#reason-target").textContent = label;
     return choose(dialog);
+  };
+}
+
+// The reason picker with its note field (reason_picker.html's `note_chars`): `pick(label)` resolves
+// to {reason, note}, reason "" when cancelled. The note starts empty each time; Enter in it picks
+// nothing (a form's Enter would press its first button, the first reason).
+export function notedReasonPicker(dialog) {
+  const pick = reasonPicker(dialog);
+  const note = dialog.querySelector("input[name=note]");
+  note.addEventListener("keydown", (event) => { if (event.key === "Enter") event.preventDefault(); });
+  return async (label) => {
+    note.value = "";
+    const reason = await pick(label);
+    return { reason, note: reason ? note.value.trim() : "" };
   };
 }
 

@@ -1,7 +1,7 @@
 // One job's page: state and progress, what it made, its parameters, timings and log, live until it ends.
 import { api, el, poll } from "./api.js";
 import { keyboardHelp } from "./help.js";
-import { joined, madeLinks, summary } from "./job_summary.js";
+import { ENDED, FAILED, joined, madeLinks, summary } from "./job_summary.js";
 import { isShortcut } from "./keys.js";
 import { formatNumber } from "./labels.js";
 import { sessionEnded } from "./session_ended.js";
@@ -13,10 +13,12 @@ const canReview = root.dataset.canReview === "true";
 const HIDDEN_PARAMS = new Set(["mask", "pictures"]);
 
 const when = (iso) => (iso ? iso.replace("T", " ").slice(0, 19) : "—");
-function seconds(from, to) {
-  if (!from || !to) return "—";
-  const s = (Date.parse(to) - Date.parse(from)) / 1000;
-  return s < 60 ? `${s.toFixed(1)} s` : `${Math.floor(s / 60)} min ${Math.round(s % 60)} s`;
+// The time every attempt ran (`took_s`), once the job has ended; "over 2 attempts" when it was retried.
+function took(job) {
+  const s = job.took_s;
+  if (s == null) return "—";
+  const text = s < 60 ? `${s.toFixed(1)} s` : `${Math.floor(s / 60)} min ${Math.round(s % 60)} s`;
+  return job.attempts > 1 ? `${text} over ${job.attempts} attempts` : text;
 }
 // Server folders are no business of the page: a path shows as its file name. Numbers read as
 // everywhere else (labels.js); lists and objects as short text, their numbers alike.
@@ -50,7 +52,7 @@ const stop = poll(async () => {
   $("job-state").className = `state ${job.state}`;
   $("job-progress").value = job.progress;
   $("job-summary").textContent = summary(job);
-  $("job-summary").classList.toggle("error", job.state === "failed" || job.state === "interrupted");
+  $("job-summary").classList.toggle("error", FAILED.includes(job.state));
   $("job-made").replaceChildren(...joined(madeLinks(job, { canReview })));
   $("job-made-row").hidden = !$("job-made").childNodes.length;
   $("job-params").replaceChildren(...pairs(job.params));
@@ -59,10 +61,10 @@ const stop = poll(async () => {
     el("dt", {}, "created"), el("dd", {}, `${when(job.created_at)} by ${job.created_by ?? "the system"}`),
     el("dt", {}, "started"), el("dd", {}, when(job.started_at)),
     el("dt", {}, "finished"), el("dd", {}, when(job.finished_at)),
-    el("dt", {}, "took"), el("dd", {}, seconds(job.started_at, job.finished_at)),
+    el("dt", {}, "took"), el("dd", {}, took(job)),
     el("dt", {}, "attempts"), el("dd", {}, String(job.attempts)));
   $("job-log").textContent = job.log || "(nothing logged yet)";
-  if (["succeeded", "failed", "interrupted"].includes(job.state)) stop();
+  if (ENDED.includes(job.state)) stop();
 }, 1500);
 
 const KEYS = {

@@ -2,10 +2,16 @@
 import { el } from "./api.js";
 import { formatNumber, plural } from "./labels.js";
 
+// States a job ends in. A cancelled job is a train job whose run someone cancelled: it ended as they
+// asked, so it is no failure (shown plainly, not in red), and it can be retried (resumed) like one.
+export const ENDED = ["succeeded", "failed", "interrupted", "cancelled"];
+export const FAILED = ["failed", "interrupted"];
+export const RETRYABLE = [...FAILED, "cancelled"];
+
 // One short line for a finished job's result.
 export function summary(job) {
   const r = job.result;
-  if (job.state === "failed" || job.state === "interrupted") return job.error ?? job.state;
+  if (RETRYABLE.includes(job.state)) return job.error ?? job.state;
   if (!r) return "";
   if (r.skipped) {
     return `already in the workspace as video ${r.video_id}${r.video_name ? ` (“${r.video_name}”)` : ""}`

@@ -2,7 +2,7 @@
 // ones can be retried. The state filter and the page are kept in the address.
 import { api, el, poll } from "./api.js";
 import { keyboardHelp } from "./help.js";
-import { joined, madeLinks, summary } from "./job_summary.js";
+import { FAILED, RETRYABLE, joined, madeLinks, summary } from "./job_summary.js";
 import { pagedList } from "./pager.js";
 import { sayFailure } from "./session_ended.js";
 
@@ -13,10 +13,10 @@ const canRetry = table.dataset.canRetry === "true";
 const canReview = table.dataset.canReview === "true";
 
 function row(job) {
-  const retry = canRetry && (job.state === "failed" || job.state === "interrupted")
+  const retry = canRetry && RETRYABLE.includes(job.state)
     ? el("button", { type: "button", className: "ghost small", onclick: () => retryJob(job) }, "Retry")
     : "";
-  const failed = job.state === "failed" || job.state === "interrupted";
+  const failed = FAILED.includes(job.state);
   return el("tr", { dataset: { jobId: job.id, state: job.state } },
     el("td", {}, el("a", { href: `${table.dataset.page}${job.id}` }, `#${job.id}`)), el("td", {}, job.kind),
     el("td", { className: "state-cell" }, el("span", { className: `state ${job.state}` }, job.state), " ", retry),

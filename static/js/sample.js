@@ -1,16 +1,16 @@
 // One sample's page: accept/reject (curators, what the sample's state allows), and the 3D preview,
 // viser's client playing the sample's scene in a dialog, with a before/after rectification switch.
 // The open preview is an entry of the tab's history (…/preview): Back closes it to this page.
-import { reasonPicker } from "./dialogs.js";
+import { notedReasonPicker } from "./dialogs.js";
 import { keyboardHelp } from "./help.js";
 import { isShortcut } from "./keys.js";
-import { allowedDecisions, decisionShortcuts, rememberDecision, review } from "./sample_review.js";
+import { allowedDecisions, decisionShortcuts, rejectionText, rememberDecision, review } from "./sample_review.js";
 import { sayFailure } from "./session_ended.js";
 
 const $ = (id) => document.getElementById(id);
 const root = $("sample");
 const picker = $("reason-picker");
-const pickReason = reasonPicker(picker);
+const pickReason = notedReasonPicker(picker);
 const viewer = $("viewer3d");
 const frame = $("viser-frame");
 const stageButtons = [...viewer.querySelectorAll("[data-stage]")];
@@ -21,6 +21,15 @@ function say(text, kind = "info") {
   const line = $("sample-status");
   line.textContent = text;
   line.dataset.kind = kind;
+}
+
+// Who rejected the sample, when and why ({reason, note, by, at}; none: not rejected).
+function showRejection(rejection) {
+  const line = $("rejection");
+  line.hidden = !rejection;
+  if (!rejection) return;
+  const when = rejection.at ? ` on ${new Date(rejection.at).toLocaleString()}` : "";
+  line.textContent = `Rejected by ${rejection.by}${when}: ${rejectionText(rejection) || "(no reason given)"}`;
 }
 
 // The state's badge, and only the buttons its state allows.
@@ -47,15 +56,16 @@ async function decide(decision) {
   if (!allowedDecisions(root.dataset.state).includes(decision)) {
     return say(root.dataset.state === "accepted" ? "This sample is already accepted." : "This sample is rejected: nothing to decide.");
   }
-  const reason = decision === "reject" ? await pickReason("this sample") : "";
-  if (decision === "reject" && !reason) return;
+  const said = decision === "reject" ? await pickReason("this sample") : {};
+  if (decision === "reject" && !said.reason) return;
   busy = true;
   try {
-    const sample = await review(root.dataset.api, decision, reason);
+    const sample = await review(root.dataset.api, decision, said);
     showState(sample.state);
+    showRejection(sample.rejection);
     rememberDecision(sample);
     say(decision === "accept" ? "Accepted: its frame is in the dataset now."
-                              : `Rejected (${reason}): the annotation went back to the annotators.`);
+                              : "Rejected: the annotation went back to the annotators.");
   } catch (err) {
     sayFailure(say)(err);
   } finally {
@@ -133,6 +143,7 @@ $("accept")?.addEventListener("click", () => decide("accept"));
 $("reject")?.addEventListener("click", () => decide("reject"));
 $("open-3d")?.addEventListener("click", () => open3d());
 showState(root.dataset.state);
+showRejection(JSON.parse(root.dataset.rejection));
 if (root.dataset.openViewer === "true") {
   // Opened at …/preview: the sample page goes under it, so Back closes the preview to the page.
   history.replaceState(null, "", root.dataset.page);

@@ -3,10 +3,14 @@ import { api } from "./api.js";
 import { reasonShortcut } from "./dialogs.js";
 import { formatNumber } from "./labels.js";
 
-// POSTs the decision to the sample's API URL; resolves to the updated sample.
-export function review(sampleUrl, decision, reason = "") {
-  return api(`${sampleUrl}/review`, { method: "POST", body: { decision, reason } });
+// POSTs the decision to the sample's API URL (a rejection with its reason and optional note);
+// resolves to the updated sample.
+export function review(sampleUrl, decision, { reason = "", note = "" } = {}) {
+  return api(`${sampleUrl}/review`, { method: "POST", body: { decision, reason, note } });
 }
+
+// "surface not flat — the left edge bends", as pages quote a rejection.
+export const rejectionText = ({ reason, note }) => (note ? `${reason} — ${note}` : reason);
 
 // The keyboard help's lines for a decision (help.js), `picker` being the reason picker.
 export const decisionShortcuts = (picker) => [

@@ -1,11 +1,11 @@
 // The samples grid: keyboard-first accept/reject of generated samples, filters, paging, and a way
 // into each sample's page and 3D preview. Decisions run one after another, in key order.
 import { api, el } from "./api.js";
-import { reasonPicker } from "./dialogs.js";
+import { notedReasonPicker } from "./dialogs.js";
 import { actLikeKeys, focusTile as focusGridTile, gridHelp, listenKeys, serial, setCursor, stepOf, turnPage } from "./grid.js";
 import { keyboardHelp } from "./help.js";
 import { framePlace } from "./labels.js";
-import { allowedDecisions, decisionShortcuts, keyFigures, rememberDecision, review, sessionCounts } from "./sample_review.js";
+import { allowedDecisions, decisionShortcuts, keyFigures, rejectionText, rememberDecision, review, sessionCounts } from "./sample_review.js";
 import { sayFailure } from "./session_ended.js";
 
 const $ = (id) => document.getElementById(id);
@@ -13,7 +13,7 @@ const root = $("samples");
 const grid = $("samples-grid");
 const filters = $("sample-filters");
 const picker = $("reason-picker");
-const pickReason = reasonPicker(picker);
+const pickReason = notedReasonPicker(picker);
 const canReview = root.dataset.canReview === "true";
 const help = keyboardHelp(gridHelp("sample", [
   ...(canReview ? decisionShortcuts(picker) : []),
@@ -88,17 +88,17 @@ async function decide(decision) {
     return say(sample.state === "accepted" ? `Sample #${sample.id} is already accepted (Reject takes it out of the dataset).`
       : `Sample #${sample.id} is rejected: its frame went back to the annotators, and comes back as a new sample.`);
   }
-  const reason = decision === "reject" ? await pickReason(`sample #${sample.id}`) : "";
-  if (decision === "reject" && !reason) return focusTile();
+  const said = decision === "reject" ? await pickReason(`sample #${sample.id}`) : {};
+  if (decision === "reject" && !said.reason) return focusTile();
   moveTo(view.focus + 1);  // on at once: the curator never waits for the server between two keys
   const tile = tileOf(sample.id);
   tile?.classList.add("busy");
   enqueue(async () => {
     try {
-      const updated = await review(`${root.dataset.list}/${sample.id}`, decision, reason);
+      const updated = await review(`${root.dataset.list}/${sample.id}`, decision, said);
       update(updated);
       tally(updated);
-      say(decision === "accept" ? `Accepted #${sample.id}.` : `Rejected #${sample.id}: ${reason}.`);
+      say(decision === "accept" ? `Accepted #${sample.id}.` : `Rejected #${sample.id}: ${rejectionText(said)}.`);
     } catch (err) {
       tile?.classList.add("conflict");
       throw err;

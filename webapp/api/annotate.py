@@ -10,7 +10,7 @@ from flask_login import current_user
 
 from dataset.formats import FormatError, mask_to_rle, rle_to_mask
 from dataset.models import Frame, RegionKind, Role, User
-from dataset.services import annotate, leases, proposals, segmentation
+from dataset.services import annotate, leases, proposals, sample_review, segmentation
 from dataset.services import jobs as job_service
 from dataset.services.errors import InvalidInput, NotFound, Unavailable
 from dataset.services.validate import db_int, optional_text
@@ -76,10 +76,13 @@ def reject_proposal(frame_id: int, proposal_id: int) -> ResponseReturnValue:
 @api.post("/frames/<int:frame_id>/lease")
 @requires(Role.annotator)
 def renew_lease(frame_id: int) -> ResponseReturnValue:
+    """``returned_waiting``: the frames sent back to the caller meanwhile (:func:`sample_review.returned_waiting`),
+    which the page names while it keeps this one."""
     expires = annotate.take_lease(g.db, frame_id, current_user, runtime().settings.annotation_lease_s)
     _prefetch(g.db.get(Frame, frame_id))  # a frame opened directly (or by ←/→) gets prepared too
     g.db.commit()
-    return {"frame_id": frame_id, "lease_expires": _iso(expires)}
+    return {"frame_id": frame_id, "lease_expires": _iso(expires),
+            "returned_waiting": sample_review.returned_waiting(g.db, current_user, other_than=frame_id)}
 
 
 @api.post("/frames/<int:frame_id>/lease/release")

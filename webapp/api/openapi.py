@@ -90,6 +90,9 @@ _BY_ERROR = [_q("evaluation", desc="an evaluation id: its database samples, wors
 # What an evaluation's report folder holds (model/report.py), as served: named types, else octet-stream.
 _REPORT_FILES = ("application/json", "text/csv", "text/html", "text/plain", "text/javascript", "image/png",
                  "application/octet-stream")
+# Frames sent back to the caller while it holds another: a count and the oldest few.
+_RETURNED_WAITING = {"type": ["object", "null"], "description": "{count, frames: [{frame_id, sample_id, reason, note, by, "
+                                                                "at, annotator}]}: frames sent back to the caller meanwhile"}
 _RUN_ID = {"name": "run_id", "in": "path", "required": True, "schema": {"type": "integer"}}
 _CHECKPOINT = {"name": "name", "in": "path", "required": True, "schema": {"type": "string"},
                "description": "a file name from the run's checkpoints (best.pt, step_0001000.pt, …)"}
@@ -260,8 +263,10 @@ def openapi_document() -> dict[str, Any]:
                 "Funnel": {"type": "object", "additionalProperties": {"type": "integer"}},
                 "Job": {"type": "object", "properties": {
                     "id": {"type": "integer"}, "kind": {"type": "string"},
-                    "state": {"enum": ["queued", "running", "succeeded", "failed", "interrupted"]},
+                    "state": {"enum": ["queued", "running", "succeeded", "failed", "interrupted", "cancelled"],
+                              "description": "cancelled: a training job whose run was cancelled (retry resumes it)"},
                     "progress": {"type": "number", "minimum": 0, "maximum": 1}, "error": {"type": ["string", "null"]},
+                    "took_s": {"type": ["number", "null"], "description": "seconds over every attempt"},
                     "result": {}, "log": {"type": "string"}}},
                 "PrefilterRequest": {"type": "object", "properties": {
                     "video_id": {"type": "integer"}, "backend": {"enum": ["heuristic", "openai", "transformers"]},
@@ -293,10 +298,14 @@ def openapi_document() -> dict[str, Any]:
                     "id": {"type": "integer"}, "frame_id": {"type": "integer"},
                     "state": {"enum": ["generated", "accepted", "rejected"]},
                     "flagged": {"type": "boolean"}, "files": {"type": "object", "description": "output name → media key"},
-                    "params": {"type": "object"}, "provenance": {"type": "object"}, "qa": {"type": "object"}}},
+                    "params": {"type": "object"}, "provenance": {"type": "object"}, "qa": {"type": "object"},
+                    "rejection": {"type": ["object", "null"], "description": "reason, note, by, at of its rejection"},
+                    "replaces": {"type": ["object", "null"], "description": "{id, state}: the frame's sample before it"},
+                    "replaced_by": {"type": ["object", "null"], "description": "{id, state}: the frame's sample after it"}}},
                 "SampleList": _list("Sample", **_PAGED),
                 "SampleDecision": {"type": "object", "required": ["decision"], "properties": {
-                    "decision": {"enum": ["accept", "reject"]}, "reason": {"type": "string"}}},
+                    "decision": {"enum": ["accept", "reject"]}, "reason": {"type": "string", "maxLength": 256},
+                    "note": {"type": "string", "maxLength": 256, "description": "free text beside a rejection's reason"}}},
                 "LeaseRelease": {"type": "object", "properties": {
                     "frame_id": {"type": "integer"}, "released": {"type": "boolean"},
                     "reason": {"type": "string", "description": "why nothing was released"}}},
@@ -306,13 +315,15 @@ def openapi_document() -> dict[str, Any]:
                     "frame_id": {"type": "integer"}, "annotation_version": {"type": "integer"},
                     "submitted": {"type": "boolean"}, "state": {"type": "string", "description": "the frame's"}}},
                 "Lease": {"type": "object", "properties": {"frame_id": {"type": "integer"},
-                                                           "lease_expires": {"type": "string", "format": "date-time"}}},
+                                                           "lease_expires": {"type": "string", "format": "date-time"},
+                                                           "returned_waiting": _RETURNED_WAITING}},
                 "FrameDetail": {"allOf": [_ref("Frame"), {"type": "object", "properties": {
                     "annotation_version": {"type": "integer"}, "submitted": {"type": "boolean"},
                     "illusion_type": {"enum": [*_ILLUSION_TYPES, None]}, "regions": {"type": "array", "items": _ref("Region")},
                     "lease": {"type": "object"}, "prev_id": {"type": ["integer", "null"]},
                     "returned": {"type": ["object", "null"], "description": "why a curator sent the frame back: "
-                                                                              "sample_id, reason, by, at, annotator"},
+                                                                              "sample_id, reason, note, by, at, annotator"},
+                    "returned_waiting": _RETURNED_WAITING,
                     "next_id": {"type": ["integer", "null"]}, "embedding_ready": {"type": "boolean"},
                     "proposals": {"type": "array", "items": _ref("Proposal")},
                     "proposals_ready": {"type": "boolean", "description": "every configured proposer has looked"},

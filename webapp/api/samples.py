@@ -57,17 +57,19 @@ def _samples_by_error(evaluation_id: int) -> dict[str, object]:
 @api.get("/samples/<int:sample_id>")
 @requires(Role.annotator)
 def get_sample(sample_id: int) -> ResponseReturnValue:
-    return sample_review.get_sample(g.db, sample_id)
+    """The sample with its review history (:func:`sample_review.sample_detail`)."""
+    return sample_review.sample_detail(g.db, sample_id)
 
 
 @api.post("/samples/<int:sample_id>/review")
 @requires(Role.curator)
 def review_sample(sample_id: int) -> ResponseReturnValue:
+    """Body ``{decision, reason, note}``: a rejection's reason, and an optional note in the curator's words."""
     body = json_body()
     sample_review.review_sample(g.db, sample_id, current_user, optional_text(body.get("decision"), "decision"),
-                                optional_text(body.get("reason"), "reason"))
+                                optional_text(body.get("reason"), "reason"), optional_text(body.get("note"), "note"))
     g.db.commit()
-    return sample_review.get_sample(g.db, sample_id)
+    return sample_review.sample_detail(g.db, sample_id)
 
 
 @api.post("/samples/<int:sample_id>/regenerate")

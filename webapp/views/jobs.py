@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
-from flask import Blueprint, render_template
+from flask import Blueprint, g, render_template
 from flask.typing import ResponseReturnValue
 
-from dataset.models import JobState, Role
+from dataset.models import Job, JobState, Role
+from dataset.services.errors import NotFound
+from webapp.api.core import _visible_jobs  # the API's rule of who sees which job, not a copy of it
 from webapp.auth import requires
 
 bp = Blueprint("jobs", __name__)
@@ -21,5 +23,7 @@ def jobs() -> ResponseReturnValue:
 @requires(Role.annotator)
 def job(job_id: int) -> ResponseReturnValue:
     """One job: progress, parameters, timings, log and links to what it made (filled in from the
-    API, which also decides who may see it)."""
+    API). A job the user may not see is the app's 404 page, as its API answers: no such job."""
+    if g.db.scalar(_visible_jobs().where(Job.id == job_id)) is None:
+        raise NotFound(f"no job {job_id}")
     return render_template("job.html", job_id=job_id)

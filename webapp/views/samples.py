@@ -20,6 +20,7 @@ from dataset.preview import images, qa
 from dataset.preview.cache import RenderCache
 from dataset.preview.sample_preview import STAGES, SamplePreview
 from dataset.services import evaluations, sample_review
+from dataset.services.validate import REASON_CHARS
 from webapp.auth import requires
 from webapp.runtime import runtime
 
@@ -45,7 +46,7 @@ def _viser_client_dir() -> Path:
 def index() -> ResponseReturnValue:
     """The grid of samples, filtered by state and flags, reviewed with the keyboard."""
     return render_template("samples.html", states=list(SampleState), reasons=sample_review.REJECT_REASONS,
-                           can_review=current_user.allows(Role.curator))
+                           note_chars=REASON_CHARS, can_review=current_user.allows(Role.curator))
 
 
 @samples.get("/samples/<int:sample_id>")
@@ -63,14 +64,14 @@ def preview(sample_id: int) -> ResponseReturnValue:
 
 
 def _sample_page(sample_id: int, open_3d: bool) -> ResponseReturnValue:
-    sample = sample_review.get_sample(g.db, sample_id)
+    sample = sample_review.sample_detail(g.db, sample_id)
     previews = _preview()
     stages = previews.stages(sample)
     return render_template(
         "sample.html", sample=sample, views=previews.views(sample), stages=stages,
         value_range=previews.disparity_range(sample) if stages else None, stops=images.colorbar_stops(),
         summary=qa.summary_rows(sample["qa"]), pairs=qa.pair_rows(sample["qa"]), reasons=sample_review.REJECT_REASONS,
-        can_review=current_user.allows(Role.curator), open_3d=open_3d and bool(stages),
+        note_chars=REASON_CHARS, can_review=current_user.allows(Role.curator), open_3d=open_3d and bool(stages),
         evaluated=evaluations.sample_evaluations(g.db, sample_id) if current_user.allows(Role.curator) else [])
 
 

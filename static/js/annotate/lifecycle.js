@@ -5,6 +5,7 @@
 import { api } from "../api.js";
 import { framePlace, plural } from "../labels.js";
 import { call } from "../request.js";
+import { rejectionText } from "../sample_review.js";
 import { sayFailure, sessionEnded } from "../session_ended.js";
 import { commit } from "./editing.js";
 import { banner, say, saveState } from "./messages.js";
@@ -24,12 +25,13 @@ const OTHER_ANNOTATOR = "another annotator is working on it";
 
 let nav = Promise.resolve();
 
-// `target` is read when the step starts, so two quick → presses move two frames.
-export function navigate(target, how = "push") {
+// `target` is read when the step starts, so two quick → presses move two frames. `keep`: the frame
+// left keeps its lease (it is still this annotator's, for after the frame opened now).
+export function navigate(target, how = "push", { keep = false } = {}) {
   nav = nav.then(async () => {
     const id = await target();
     if (id == null) return;
-    await leave();
+    await leave({ keep });
     await open(id, how);
   }).catch(sayFailure(say));
   return nav;
@@ -53,12 +55,13 @@ export function start(frameId) {
   navigate(frameId ? async () => frameId : fromQueue, "replace");
 }
 
-async function leave() {
+async function leave({ keep = false } = {}) {
   if (!page.session) return;
   const leaving = page.session;
   page.session = null;
   await leaving.flush();
-  leaving.release();
+  if (keep) leaving.close();
+  else leaving.release();
 }
 
 export async function fromQueue() {
@@ -109,6 +112,7 @@ async function open(id, how) {
   view.setImage(image);
   banner(null);
   showReturned(detail.returned);
+  showWaiting(detail.returned_waiting);
   if (reason) readOnly(reason);
   else {
     const draft = `Draft loaded: ${plural(serverDoc.pairs.length, "plane")}`;
@@ -129,7 +133,29 @@ function showReturned(returned) {
   const to = returned.annotator === root.dataset.user || !returned.annotator ? "you" : returned.annotator;
   const when = returned.at ? ` on ${new Date(returned.at).toLocaleString()}` : "";
   $("returned-title").textContent = `Sent back to ${to} by ${returned.by}${when}, who rejected its sample:`;
-  $("returned-reason").textContent = returned.reason || "(no reason given)";
+  $("returned-reason").textContent = rejectionText(returned) || "(no reason given)";
+}
+
+// Frames a curator sent back to this annotator while another one is on the page (`returned_waiting`
+// of the frame's detail and of each lease renewal): the oldest named above the stage, with a link.
+// Opening it leaves this frame's lease as it is: the frame stays this annotator's, and the queue
+// hands it back once the returned one is submitted.
+export function showWaiting(waiting) {
+  const first = waiting?.frames?.[0];
+  $("came-back").hidden = !first;
+  if (!first) return;
+  const when = first.at ? ` on ${new Date(first.at).toLocaleString()}` : "";
+  const others = waiting.count > 1 ? ` ${plural(waiting.count - 1, "other frame")} came back too.` : "";
+  $("came-back-text").textContent = `Frame #${first.frame_id} came back to you: ${first.by} rejected its sample${when} `
+    + `(${rejectionText(first) || "no reason given"}).${others} You keep this frame meanwhile.`;
+  const link = $("came-back-link");
+  link.href = `/annotate/${first.frame_id}`;
+  link.textContent = `Open frame #${first.frame_id}`;
+  link.onclick = (event) => {
+    if (event.button !== 0 || event.ctrlKey || event.metaKey || event.shiftKey || event.altKey) return;  // a new tab
+    event.preventDefault();
+    navigate(async () => first.frame_id, "push", { keep: true });
+  };
 }
 
 function readOnly(reason) {
@@ -174,6 +200,7 @@ function hold(serverDoc) {
       if (sessionEnded(err)) return;
       say(`Could not save the draft (${err.message}); it is kept in this browser and retried.`, "error");
     }),
+    leaseKept: here((renewal) => showWaiting(renewal.returned_waiting)),
     leaseLost: here((message) => {  // another annotator took it while the lease had run out, or it left the queue
       readOnly(message);
       say(`This frame is read-only: ${message}. Your changes are kept in this browser.`, "error");
@@ -231,6 +258,7 @@ async function showEmpty() {
   $("frame-info").textContent = "";
   $("preparing").hidden = true;
   $("returned").hidden = true;
+  $("came-back").hidden = true;
   banner(null);
   saveState("");
   say("All caught up: no approved frames are waiting.");

@@ -16,10 +16,11 @@ import { render } from "./render.js";
 import { fromRuns, runsOf } from "./rle.js";
 import * as S from "./state.js";
 
-// frame: the id they belong to; items: the pending ones, best first; note: why there are none (the
-// server's words); ready: every proposer has looked; rejected: ids rejected here (a lookup already
-// under way must not bring them back); highlight: the highlighted one's id.
-const offer = { frame: null, items: [], note: "", ready: true, rejected: new Set(), highlight: null };
+// frame: the id they belong to; all: every proposal the frame had, whatever its fate; items: the
+// pending ones, best first; note: why there are none (the server's words); ready: every proposer has
+// looked; rejected: ids rejected here (a lookup already under way must not bring them back);
+// highlight: the highlighted one's id.
+const offer = { frame: null, all: [], items: [], note: "", ready: true, rejected: new Set(), highlight: null };
 const outlines = new Map();  // proposal id → { illusion, support } outlines of the frame on screen
 
 // Takes the proposals of a frame detail: when the frame opens, and each time it is looked up again.
@@ -28,7 +29,8 @@ export function offerProposals(detail) {
     outlines.clear();
     Object.assign(offer, { frame: detail.id, rejected: new Set(), highlight: null });
   }
-  offer.items = (detail.proposals ?? []).filter((p) => p.fate === "pending");
+  offer.all = detail.proposals ?? [];
+  offer.items = offer.all.filter((p) => p.fate === "pending");
   offer.note = detail.proposals_note ?? "";
   offer.ready = detail.proposals_ready ?? true;
 }
@@ -61,7 +63,17 @@ export function proposalsNote(shown) {
   if (!offer.ready) return note || "Proposals are being computed…";
   if (shown.length) return note || "Dashed on the frame; Tab highlights the next one.";
   if (note) return note;
-  return offer.items.length ? "None left: each was accepted or rejected." : "The proposers found nothing in this frame.";
+  return offer.all.length ? decidedNote() : "The proposers found nothing in this frame.";
+}
+
+// None left to decide, though the frame had some: how many, and what became of them (here, before a
+// reload, or when the frame was submitted before a curator sent it back).
+function decidedNote() {
+  const taken = page.history ? S.proposalsIn(page.history.doc) : new Set();
+  const took = offer.all.filter((p) => taken.has(p.id) || ["accepted", "edited"].includes(p.fate)).length;
+  const fates = [took && `${took} taken as ${took === 1 ? "a plane" : "planes"}`,
+                 offer.all.length - took && `${offer.all.length - took} rejected`].filter(Boolean);
+  return `The proposers found ${plural(offer.all.length, "proposal")} in this frame; none is left to decide: ${fates.join(", ")}.`;
 }
 
 // What the canvas draws: each shown proposal's outlines and label, the highlighted one last (on top).

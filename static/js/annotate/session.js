@@ -8,7 +8,8 @@ const SAVE_DELAY_MS = 2000;
 const RETRY_MS = 5000;
 
 export class FrameSession {
-  // hooks: saving(), saved(doc, version), conflict(message), failed(error), leaseLost(message)
+  // hooks: saving(), saved(doc, version), conflict(message), failed(error), leaseKept(renewal: the
+  // lease answer), leaseLost(message)
   constructor(api, frame, saved, hooks) {
     this.url = `${api}/frames/${frame.id}`;
     this.frame = frame;
@@ -23,6 +24,7 @@ export class FrameSession {
   keepLease(leaseS) {
     this.leaseTimer = setInterval(async () => {
       const res = await call(`${this.url}/lease`);
+      if (res.ok) this.hooks.leaseKept(res.data);
       if (res.status === 409) {
         this.close();
         this.hooks.leaseLost(res.error.message);
