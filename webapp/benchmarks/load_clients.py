@@ -137,7 +137,8 @@ def _annotate_frame(client: Client, rng: random.Random, frame_id: int) -> None:
         if not _ok(seg):
             break
         body = {"version": version, "submit": submit, "illusion_type": "picture",
-                "regions": [{"pair": 0, "kind": "illusion", "mask": seg.json()["mask"], "clicks": points}]}
+                "regions": [{"pair": 0, "kind": "illusion", "mask": seg.json()["mask"],
+                             "clicks": [{"x": x, "y": y, "label": 1} for x, y in points]}]}
         if not _save(client, frame_id, body):
             break  # 409: a curator sent the frame back meanwhile, or it is someone else's now
         version = client.tally.saves[-1].version
