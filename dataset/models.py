@@ -475,12 +475,14 @@ class AuditEntry(Base):
 
 class ProposalFate(enum.StrEnum):
     """What became of a proposal: still waiting, taken as it was, taken after the annotator's edits,
-    or turned down (explicitly, or left untouched when the frame was submitted)."""
+    or turned down (explicitly, or left untouched when the frame was submitted); ``hidden``: scored
+    under its scan's threshold, so not shown unless asked, and left untouched."""
 
     pending = "pending"
     accepted = "accepted"
     edited = "edited"
     rejected = "rejected"
+    hidden = "hidden"
 
 
 class ProposalScan(Base):
@@ -498,6 +500,8 @@ class ProposalScan(Base):
     seconds: Mapped[float] = mapped_column(default=0.0, doc="Wall time the proposer took on the frame.")
     misses: Mapped[int | None] = mapped_column(doc="Submitted illusions it did not find (IoU < 0.5); null until submit.")
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    threshold: Mapped[float] = mapped_column(default=0.0, server_default="0",
+                                             doc="Score under which its proposals were hidden (setting proposal_threshold).")
 
     proposals: Mapped[list[Proposal]] = relationship(back_populates="scan", cascade="all, delete-orphan",
                                                      order_by="Proposal.rank")

@@ -115,6 +115,10 @@ class Settings(BaseSettings):
     proposers: list[Literal["plane-break", "vlm"]] = Field(
         default_factory=lambda: ["plane-break"],
         description="Illusion proposers run on frames to annotate: plane-break (no weights), vlm (the VLM backend).")
+    # plane-break's DEFAULT_THRESHOLD (a test holds them equal): importing it here would load OpenCV with the settings.
+    proposal_threshold: float = Field(
+        0.5, ge=0, le=1,
+        description="Proposals scoring under this are hidden on the Annotate page unless \"show all\" is on.")
     # What the web may name and launch: dataset folders only inside these roots (by name), and
     # training runs within what a train worker's machine holds (each worker checks its own again).
     dataset_roots: dict[str, Path] = Field(

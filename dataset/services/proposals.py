@@ -5,8 +5,15 @@ A scan is one proposer having looked at one frame (its note says why it found no
 not look); its proposals wait (``pending``) until the annotator accepts one — it becomes a pair of
 the annotation whose regions carry ``{"proposal_id": N}`` among their clicks — or rejects it. On
 submit every proposal of the frame gets its fate: ``accepted`` (both masks as proposed), ``edited``
-(with the IoU between the proposed and the submitted illusion), or ``rejected`` (turned down, or left
-untouched); and each scan counts the submitted illusions none of its proposals found (IoU < MATCH_IOU).
+(with the IoU between the proposed and the submitted illusion), ``rejected`` (turned down, or left
+untouched while shown) or ``hidden`` (left untouched while hidden); and each scan counts the submitted
+illusions none of its shown or taken proposals found (IoU < MATCH_IOU).
+
+The propose job keeps every proposal scoring at least plane-break's SCORE_FLOOR; the scan stores the
+threshold in force (setting ``proposal_threshold``), and the page hides those scoring under it unless
+the annotator asks to see all. A hidden proposal the annotator never saw is no verdict on it: its fate
+``hidden`` counts neither against the acceptance rate nor as a find, and the figures per proposer are
+grouped by threshold, since a threshold changes what annotators are shown.
 """
 
 from __future__ import annotations
@@ -23,6 +30,7 @@ from sqlalchemy.orm import Session
 
 from annotation.proposals import Proposer, make_proposers
 from annotation.proposals.base import ProposalError, mask_iou
+from annotation.proposals.plane_break import SCORE_FLOOR
 from dataset.db import transaction
 from dataset.formats import mask_to_rle, rle_to_mask
 from dataset.models import (
@@ -55,10 +63,12 @@ CHUNK = 16  # frames per propose job
 
 def configured_proposers(settings: Settings) -> list[Proposer]:
     """The proposers named by ``settings.proposers``, with the configured VLM backend and segmenter
-    (both cached per process, so a model loads once per worker)."""
+    (both cached per process, so a model loads once per worker). They keep every proposal scoring at
+    least SCORE_FLOOR: the page hides those under the threshold (module doc)."""
     if "vlm" not in settings.proposers:
-        return make_proposers(settings.proposers)
-    return make_proposers(settings.proposers, vlm=backend_for(settings, {}), segmenter=settings_segmenter(settings))
+        return make_proposers(settings.proposers, min_score=SCORE_FLOOR)
+    return make_proposers(settings.proposers, vlm=backend_for(settings, {}), segmenter=settings_segmenter(settings),
+                          min_score=SCORE_FLOOR)
 
 
 def frames_to_scan(session: Session, settings: Settings, frame_ids: Sequence[int]) -> list[int]:
@@ -133,7 +143,7 @@ def _propose_frame(ctx: JobContext, proposers: Sequence[Proposer], frame_id: int
         if why and proposer.needs_mono:
             note = f"{note} ({why})"
         scan = ProposalScan(frame_id=frame_id, source=proposer.name, content_sha256=frame.content_sha256, note=note,
-                            seconds=round(time.perf_counter() - started, 3))
+                            seconds=round(time.perf_counter() - started, 3), threshold=ctx.settings.proposal_threshold)
         scan.proposals = [Proposal(frame_id=frame_id, source=proposer.name, rank=rank, type_guess=p.illusion_type,
                                    score=round(float(p.score), 4), illusion_rle=mask_to_rle(p.illusion),
                                    support_rle=mask_to_rle(p.support)) for rank, p in enumerate(items)]
@@ -170,11 +180,17 @@ def frame_proposals(session: Session, settings: Settings, frame_id: int) -> dict
 
 def proposal_json(proposal: Proposal) -> dict[str, Any]:
     """A proposal for the page: ``illusion_type`` is its guess where that is an annotation type (a
-    "transparent" guess leaves the choice to the annotator), ``guess`` the proposer's own word."""
+    "transparent" guess leaves the choice to the annotator), ``guess`` the proposer's own word,
+    ``hidden`` whether it scored under its scan's threshold (shown only when the annotator asks)."""
     typed = proposal.type_guess if proposal.type_guess in IllusionType.__members__ else None
     return {"id": proposal.id, "source": proposal.source, "score": proposal.score, "illusion_type": typed,
             "guess": proposal.type_guess, "illusion": proposal.illusion_rle, "support": proposal.support_rle,
-            "fate": proposal.fate.value, "iou": proposal.iou}
+            "fate": proposal.fate.value, "iou": proposal.iou, "hidden": is_hidden(proposal)}
+
+
+def is_hidden(proposal: Proposal) -> bool:
+    """The proposal scored under the threshold in force when its frame was scanned."""
+    return proposal.score < proposal.scan.threshold
 
 
 def reject_proposal(session: Session, frame_id: int, proposal_id: int, user: User | Any) -> Proposal:
@@ -232,9 +248,11 @@ def record_fates(session: Session, frame_id: int, regions: Sequence[Region], use
             same = iou == 1.0 and np.array_equal(proposed_support, support)
             _decide(proposal, ProposalFate.accepted if same else ProposalFate.edited, round(iou, 4), user)
         elif proposal.fate != ProposalFate.rejected:
-            _decide(proposal, ProposalFate.rejected, None, user)
+            _decide(proposal, ProposalFate.hidden if is_hidden(proposal) else ProposalFate.rejected, None, user)
     masks_by_source: dict[str, list[np.ndarray]] = {}
     for proposal in proposals.values():
+        if proposal.fate == ProposalFate.hidden:  # never seen: it found nothing for the annotator
+            continue
         masks_by_source.setdefault(proposal.source, []).append(rle_to_mask(proposal.illusion_rle, shape))
     for scan in scans:
         if scan.note:  # it could not look (no monocular disparity, no VLM answer): it missed nothing
@@ -258,35 +276,47 @@ def _decide(proposal: Proposal, fate: ProposalFate, iou: float | None, user: Use
 
 
 def proposer_stats(session: Session) -> dict[str, Any]:
-    """Per proposer: frames scanned, proposals by fate, acceptance rate (accepted and edited over decided),
-    median IoU of the accepted ones (as proposed = 1), misses, and the median seconds per frame."""
-    out: dict[str, dict[str, Any]] = {}
-    for source, frames, misses in session.execute(
-            select(ProposalScan.source, func.count(), func.coalesce(func.sum(ProposalScan.misses), 0))
-            .group_by(ProposalScan.source)):
-        out[source] = {"frames": frames, "misses": int(misses), **{f.value: 0 for f in ProposalFate}}
-    for source, fate, count in session.execute(select(Proposal.source, Proposal.fate, func.count())
-                                               .group_by(Proposal.source, Proposal.fate)):
-        out.setdefault(source, {"frames": 0, "misses": 0, **{f.value: 0 for f in ProposalFate}})[fate.value] = count
-    for source, row in out.items():
-        row["proposals"] = sum(row[f.value] for f in ProposalFate)
-        taken = row["accepted"] + row["edited"]
-        decided = taken + row["rejected"]
-        row["acceptance_rate"] = round(taken / decided, 4) if decided else None
-        row["median_iou"] = _median(session, Proposal.iou, Proposal.source == source, Proposal.fate.in_(TAKEN),
-                                    Proposal.iou.is_not(None))
-        seconds = session.scalars(select(ProposalScan.seconds).where(ProposalScan.source == source)
-                                  .order_by(ProposalScan.id.desc()).limit(1000)).all()
-        row["ms_per_frame"] = round(1000 * statistics.median(seconds), 1) if seconds else None
-    return {"proposers": dict(sorted(out.items()))}
+    """Per proposer, over all its scans and in ``by_threshold`` (highest first) over those made at each
+    threshold in force: frames scanned, proposals by fate, acceptance rate (accepted and edited over
+    those shown and decided: a hidden one left untouched is no verdict), median IoU of the accepted
+    ones (as proposed = 1), misses, and the median seconds per frame."""
+    groups: dict[str, list[float]] = {}
+    for source, threshold in session.execute(select(ProposalScan.source, ProposalScan.threshold).distinct()
+                                             .order_by(ProposalScan.source, ProposalScan.threshold.desc())):
+        groups.setdefault(source, []).append(threshold)
+    return {"proposers": {source: {**_figures(session, ProposalScan.source == source),
+                                   "by_threshold": [{"threshold": t, **_figures(session, ProposalScan.source == source,
+                                                                                ProposalScan.threshold == t)}
+                                                    for t in thresholds]}
+                          for source, thresholds in groups.items()}}
+
+
+def _figures(session: Session, *scans: Any) -> dict[str, Any]:
+    """:func:`proposer_stats`' figures over the scans that ``scans`` (conditions on ProposalScan) select."""
+    frames, misses = session.execute(select(func.count(), func.coalesce(func.sum(ProposalScan.misses), 0))
+                                     .where(*scans)).one()
+    row: dict[str, Any] = {"frames": frames, "misses": int(misses), **{f.value: 0 for f in ProposalFate}}
+    of_scans = select(Proposal.fate, func.count()).join(ProposalScan, Proposal.scan_id == ProposalScan.id).where(*scans)
+    for fate, count in session.execute(of_scans.group_by(Proposal.fate)):
+        row[fate.value] = count
+    row["proposals"] = sum(row[f.value] for f in ProposalFate)
+    taken = row["accepted"] + row["edited"]
+    decided = taken + row["rejected"]
+    row["acceptance_rate"] = round(taken / decided, 4) if decided else None
+    row["median_iou"] = _median(session, Proposal.iou, *scans, Proposal.fate.in_(TAKEN), Proposal.iou.is_not(None))
+    seconds = session.scalars(select(ProposalScan.seconds).where(*scans).order_by(ProposalScan.id.desc()).limit(1000)).all()
+    row["ms_per_frame"] = round(1000 * statistics.median(seconds), 1) if seconds else None
+    return row
 
 
 def _median(session: Session, column: Any, *where: Any) -> float | None:
-    """The median of ``column`` over the rows ``where`` selects, in the database: the dashboard polls
-    this, and at the paper's scale there are a million proposals to not load into Python."""
-    count = session.scalar(select(func.count()).select_from(Proposal).where(*where))
+    """The median of ``column`` over the proposals (joined with their scans) ``where`` selects, in the
+    database: the dashboard polls this, and at the paper's scale there are a million proposals to not
+    load into Python."""
+    joined = select(func.count()).select_from(Proposal).join(ProposalScan, Proposal.scan_id == ProposalScan.id)
+    count = session.scalar(joined.where(*where))
     if not count:
         return None
-    middle = session.scalars(select(column).where(*where).order_by(column)
-                             .offset((count - 1) // 2).limit(2 - count % 2)).all()
+    middle = session.scalars(select(column).join(ProposalScan, Proposal.scan_id == ProposalScan.id).where(*where)
+                             .order_by(column).offset((count - 1) // 2).limit(2 - count % 2)).all()
     return round(statistics.fmean(middle), 4)

@@ -5,8 +5,8 @@ import { keyboardHelp } from "./help.js";
 
 const funnel = document.getElementById("funnel");
 const proposers = document.getElementById("proposers");
-const COLUMNS = ["frames", "proposals", "accepted", "edited", "rejected", "acceptance_rate", "median_iou", "misses",
-                 "ms_per_frame"];
+const COLUMNS = ["threshold", "frames", "proposals", "accepted", "edited", "rejected", "hidden", "acceptance_rate",
+                 "median_iou", "misses", "ms_per_frame"];
 
 poll(async () => {
   const counts = await api(funnel.dataset.src);
@@ -22,14 +22,17 @@ poll(async () => {
 function figure(column, value) {
   if (value == null) return "—";
   if (column === "acceptance_rate") return `${Math.round(100 * value)} %`;
-  if (column === "median_iou") return value.toFixed(2);
+  if (["median_iou", "threshold"].includes(column)) return value.toFixed(2);
   return column === "ms_per_frame" ? `${value.toLocaleString()} ms` : value.toLocaleString();
 }
 
+// A row per proposer and threshold in force: a threshold changes what annotators see, so their figures
+// are not to be mixed.
 poll(async () => {
-  const stats = Object.entries((await api(proposers.dataset.src)).proposers).filter(([, s]) => s.proposals || s.frames);
-  const rows = stats.map(([name, s]) => el("tr", { dataset: { proposer: name } }, el("th", { scope: "row" }, name),
-    ...COLUMNS.map((c) => el("td", { dataset: { column: c } }, figure(c, s[c])))));
+  const stats = Object.entries((await api(proposers.dataset.src)).proposers)
+    .flatMap(([name, s]) => s.by_threshold.map((t) => [name, t])).filter(([, s]) => s.proposals || s.frames);
+  const rows = stats.map(([name, s]) => el("tr", { dataset: { proposer: name, threshold: s.threshold } },
+    el("th", { scope: "row" }, name), ...COLUMNS.map((c) => el("td", { dataset: { column: c } }, figure(c, s[c])))));
   const empty = el("tr", { className: "empty" }, el("td", { colSpan: COLUMNS.length + 1, className: "muted" }, "No proposals yet"));
   proposers.tBodies[0].replaceChildren(...(rows.length ? rows : [empty]));
 }, 5000);

@@ -93,6 +93,12 @@ _REPORT_FILES = ("application/json", "text/csv", "text/html", "text/plain", "tex
 # Frames sent back to the caller while it holds another: a count and the oldest few.
 _RETURNED_WAITING = {"type": ["object", "null"], "description": "{count, frames: [{frame_id, sample_id, reason, note, by, "
                                                                 "at, annotator}]}: frames sent back to the caller meanwhile"}
+# A proposer's figures (GET /stats/proposers), over all its scans and per threshold in force.
+_PROPOSER_FIGURES = {"frames": {"type": "integer"}, "proposals": {"type": "integer"}, "pending": {"type": "integer"},
+                     "accepted": {"type": "integer"}, "edited": {"type": "integer"}, "rejected": {"type": "integer"},
+                     "hidden": {"type": "integer", "description": "under the threshold and left untouched"},
+                     "acceptance_rate": {"type": ["number", "null"]}, "median_iou": {"type": ["number", "null"]},
+                     "misses": {"type": "integer"}, "ms_per_frame": {"type": ["number", "null"]}}
 _RUN_ID = {"name": "run_id", "in": "path", "required": True, "schema": {"type": "integer"}}
 _CHECKPOINT = {"name": "name", "in": "path", "required": True, "schema": {"type": "string"},
                "description": "a file name from the run's checkpoints (best.pt, step_0001000.pt, …)"}
@@ -333,16 +339,14 @@ def openapi_document() -> dict[str, Any]:
                     "illusion_type": {"enum": [*_ILLUSION_TYPES, None]}, "guess": {"type": ["string", "null"]},
                     "illusion": {"type": "object", "description": "COCO RLE"},
                     "support": {"type": "object", "description": "COCO RLE"},
-                    "fate": {"enum": ["pending", "accepted", "edited", "rejected"]},
-                    "iou": {"type": ["number", "null"]}}},
+                    "fate": {"enum": ["pending", "accepted", "edited", "rejected", "hidden"]},
+                    "iou": {"type": ["number", "null"]},
+                    "hidden": {"type": "boolean", "description": "scored under its scan's threshold: shown on request"}}},
                 "ProposalFate": {"type": "object", "properties": {"id": {"type": "integer"}, "fate": {"type": "string"}}},
                 "ProposerStats": {"type": "object", "properties": {"proposers": {
                     "type": "object", "additionalProperties": {"type": "object", "properties": {
-                        "frames": {"type": "integer"}, "proposals": {"type": "integer"},
-                        "pending": {"type": "integer"}, "accepted": {"type": "integer"},
-                        "edited": {"type": "integer"}, "rejected": {"type": "integer"},
-                        "acceptance_rate": {"type": ["number", "null"]}, "median_iou": {"type": ["number", "null"]},
-                        "misses": {"type": "integer"}, "ms_per_frame": {"type": ["number", "null"]}}}}}},
+                        **_PROPOSER_FIGURES, "by_threshold": {"type": "array", "items": {"type": "object", "properties": {
+                            **_PROPOSER_FIGURES, "threshold": {"type": "number"}}}}}}}}},
                 "RLE": {"type": "object", "description": "COCO run-length encoding (pycocotools)",
                         "properties": {"size": {"type": "array", "items": {"type": "integer"}}, "counts": {"type": "string"}}},
                 "Region": {"type": "object", "required": ["pair", "kind", "mask"], "properties": {

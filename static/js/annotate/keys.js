@@ -40,6 +40,8 @@ const SHORTCUTS = [
   { keys: ["r"], show: ["R"], does: "reject the highlighted proposal", command: "rejectProposal" },
   { keys: ["Tab", "Shift+Tab"], show: ["Tab", "Shift+Tab"], does: "highlight the next / previous proposal",
     command: "highlightProposal", repeat: true },
+  { keys: ["v"], show: ["V"], does: "show all proposals, those under the threshold too (again: hide them)",
+    command: "showAllProposals" },
 ];
 
 // "Ctrl+Shift+z" style names; Shift only counts where it doesn't already pick the character ("?", "+").

@@ -14,7 +14,9 @@ import { start, stepFrame } from "./lifecycle.js";
 import { $, page, prefs, root } from "./page.js";
 import { listenPanel } from "./panel.js";
 import { propagate } from "./propagate.js";
-import { acceptProposal, cycleProposal, highlighted, rejectProposal, shownProposals, wantsTab } from "./proposals.js";
+import {
+  acceptProposal, cycleProposal, highlighted, rejectProposal, shownProposals, toggleShowAll, wantsTab,
+} from "./proposals.js";
 import { render } from "./render.js";
 import { deleteFrame, submit } from "./submit.js";
 import { setBrush, setOpacity, setTool, toggleMasks, view } from "./tools.js";
@@ -33,6 +35,7 @@ const COMMANDS = {
   acceptProposal: () => acceptProposal(),
   rejectProposal: () => rejectProposal(),
   highlightProposal: (key) => cycleProposal(key === "Tab" ? 1 : -1),
+  showAllProposals: toggleShowAll,
   clickTool: () => setTool("click"),
   brush: () => setTool("brush"),
   eraser: () => setTool("eraser"),

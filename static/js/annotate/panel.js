@@ -6,7 +6,9 @@ import { checkQueue, stepFrame } from "./lifecycle.js";
 import { regionName } from "./messages.js";
 import { $, page, prefs, root, ui } from "./page.js";
 import { propagate } from "./propagate.js";
-import { acceptProposal, highlighted, highlightProposal, proposalsNote, rejectProposal, shownProposals } from "./proposals.js";
+import {
+  acceptProposal, highlighted, highlightProposal, proposalsNote, rejectProposal, showingAll, shownProposals, toggleShowAll,
+} from "./proposals.js";
 import * as S from "./state.js";
 import { deleteFrame, submit } from "./submit.js";
 import { setBrush, setOpacity, setTool, view } from "./tools.js";
@@ -26,6 +28,7 @@ export function renderPanel(doc) {
   const shown = shownProposals(), chosen = highlighted(shown);
   $("proposals-section").hidden = locked;
   $("proposals-note").textContent = proposalsNote(shown);
+  $("show-all-proposals").checked = showingAll();
   $("proposals").replaceChildren(...shown.map((p) => proposalRow(p, p === chosen)));
 }
 
@@ -33,10 +36,12 @@ export function renderPanel(doc) {
 // keys on the highlighted one, which the keys act on).
 function proposalRow(p, chosen) {
   const key = (k) => (chosen ? el("kbd", {}, k) : "");
-  return el("li", { className: "proposal", dataset: { proposal: p.id }, ariaCurrent: String(chosen),
+  return el("li", { className: "proposal", dataset: { proposal: p.id, hidden: String(Boolean(p.hidden)) },
+                    ariaCurrent: String(chosen),
                     title: chosen ? "Highlighted: the keys act on it (Tab: the next one)" : "Click to highlight it" },
   el("span", { className: "source" }, p.source),
-  el("span", { className: "score", title: "The proposer's confidence, 0–1" }, p.score.toFixed(2)),
+  el("span", { className: "score", title: p.hidden ? "The proposer's confidence, 0–1: under the threshold, shown because "
+                + "Show all is on (V)" : "The proposer's confidence, 0–1" }, p.score.toFixed(2)),
   el("span", { className: "type", dataset: { guessed: p.illusion_type ? "yes" : "no" } }, p.illusion_type ?? "type?"),
   el("span", { className: "decide" },
     el("button", { type: "button", dataset: { decide: "accept" }, title: "Accept: a plane with its masks, to correct with clicks (a)" },
@@ -96,6 +101,7 @@ export function listenPanel() {
   onClick("submit", submit);
   onClick("delete", deleteFrame);
   onClick("check-again", checkQueue);
+  onClick("show-all-proposals", toggleShowAll);
   onClick("proposals", (event) => {
     const row = event.target.closest("[data-proposal]");
     if (!row) return;

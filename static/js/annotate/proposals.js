@@ -4,7 +4,9 @@
 // regions' clicks: the annotator's work from then on, corrected with clicks like any mask, and an
 // undo brings the proposal back. Rejecting one tells the server at once. Proposals stay outside the
 // annotation's history: one the document took is simply not shown. One is highlighted at a time, the
-// best first; the keys act on it.
+// best first; the keys act on it. Those scoring under the threshold in force when the frame was scanned
+// (`hidden`) are left out unless the annotator asks to see all (V, or the panel's "Show all"); left
+// untouched, they get the fate `hidden` on submit, which is no verdict on them.
 import { plural } from "../labels.js";
 import { call } from "../request.js";
 import { sessionEnded } from "../session_ended.js";
@@ -19,8 +21,9 @@ import * as S from "./state.js";
 // frame: the id they belong to; all: every proposal the frame had, whatever its fate; items: the
 // pending ones, best first; note: why there are none (the server's words); ready: every proposer has
 // looked; rejected: ids rejected here (a lookup already under way must not bring them back);
-// highlight: the highlighted one's id.
-const offer = { frame: null, all: [], items: [], note: "", ready: true, rejected: new Set(), highlight: null };
+// highlight: the highlighted one's id; showAll: the hidden ones shown too (kept from frame to frame).
+const offer = { frame: null, all: [], items: [], note: "", ready: true, rejected: new Set(), highlight: null,
+                showAll: false };
 const outlines = new Map();  // proposal id → { illusion, support } outlines of the frame on screen
 
 // Takes the proposals of a frame detail: when the frame opens, and each time it is looked up again.
@@ -37,25 +40,49 @@ export function offerProposals(detail) {
 
 // The first words on a fresh frame with proposals; null without.
 export function proposalsHint() {
-  const n = offer.items.length;
-  return n ? `${plural(n, "proposal")} dashed on the frame: A accepts the highlighted one, R rejects it, Tab goes on — `
-    + "or click inside the illusion." : null;
+  const n = offer.items.filter(isShown).length, more = hiddenLeft();
+  if (!n) {
+    return more ? `${plural(more, "proposal")} under the threshold hidden: V shows them — or click inside the illusion.` : null;
+  }
+  const also = more ? ` (V shows ${more} more under the threshold)` : "";
+  return `${plural(n, "proposal")} dashed on the frame${also}: A accepts the highlighted one, R rejects it, Tab goes on — `
+    + "or click inside the illusion.";
+}
+
+const isShown = (p) => offer.showAll || !p.hidden;
+// How many pending proposals under the threshold "show all" would add (none taken or rejected here).
+function hiddenLeft() {
+  if (offer.showAll) return 0;
+  const taken = page.history ? S.proposalsIn(page.history.doc) : new Set();
+  return offer.items.filter((p) => p.hidden && !taken.has(p.id) && !offer.rejected.has(p.id)).length;
+}
+export const showingAll = () => offer.showAll;
+
+// V (or the panel's "Show all"): the proposals under the threshold shown too, or hidden again.
+export function toggleShowAll() {
+  offer.showAll = !offer.showAll;
+  render();
+  const n = offer.items.filter((p) => p.hidden).length;
+  say(offer.showAll ? `Showing all proposals: ${plural(n, "proposal")} under the threshold too.`
+    : "Showing the proposals at or above the threshold only.");
 }
 
 // Whether proposals are still being computed for a frame this annotator holds (worth looking again).
 export const awaitingProposals = () => Boolean(page.session) && !offer.ready;
 
-// The proposals on show: pending, not rejected here, not taken into the annotation; none read-only.
+// The proposals on show: pending, at or above the threshold (all with "show all"), not rejected here, not
+// taken into the annotation; none read-only.
 export function shownProposals() {
   if (!page.session || offer.frame !== page.frame?.id) return [];
   const taken = S.proposalsIn(page.history.doc);
-  return offer.items.filter((p) => !taken.has(p.id) && !offer.rejected.has(p.id));
+  return offer.items.filter((p) => isShown(p) && !taken.has(p.id) && !offer.rejected.has(p.id));
 }
 
 export const highlighted = (shown = shownProposals()) => shown.find((p) => p.id === offer.highlight) ?? shown[0] ?? null;
 
 // "plane-break 0.93 · picture"
-export const proposalLabel = (p) => `${p.source} ${p.score.toFixed(2)} · ${p.illusion_type ?? "type?"}`;
+export const proposalLabel = (p) => `${p.source} ${p.score.toFixed(2)} · ${p.illusion_type ?? "type?"}`
+  + (p.hidden ? " · under threshold" : "");
 
 // The panel's line about them: why there are none, or how to go through them.
 export function proposalsNote(shown) {
@@ -63,6 +90,8 @@ export function proposalsNote(shown) {
   if (!offer.ready) return note || "Proposals are being computed…";
   if (shown.length) return note || "Dashed on the frame; Tab highlights the next one.";
   if (note) return note;
+  const more = hiddenLeft();
+  if (more) return `${plural(more, "proposal")} under the threshold ${more === 1 ? "is" : "are"} hidden: V shows them.`;
   return offer.all.length ? decidedNote() : "The proposers found nothing in this frame.";
 }
 
@@ -71,8 +100,9 @@ export function proposalsNote(shown) {
 function decidedNote() {
   const taken = page.history ? S.proposalsIn(page.history.doc) : new Set();
   const took = offer.all.filter((p) => taken.has(p.id) || ["accepted", "edited"].includes(p.fate)).length;
-  const fates = [took && `${took} taken as ${took === 1 ? "a plane" : "planes"}`,
-                 offer.all.length - took && `${offer.all.length - took} rejected`].filter(Boolean);
+  const hidden = offer.all.filter((p) => p.fate === "hidden").length, rejected = offer.all.length - took - hidden;
+  const fates = [took && `${took} taken as ${took === 1 ? "a plane" : "planes"}`, rejected && `${rejected} rejected`,
+                 hidden && `${hidden} left hidden`].filter(Boolean);
   return `The proposers found ${plural(offer.all.length, "proposal")} in this frame; none is left to decide: ${fates.join(", ")}.`;
 }
 
