@@ -149,3 +149,13 @@ def upgrade_checkpoint(path: Path) -> bool:
     atomic_write_bytes(path, data)
     return True
 
+
+
+def load_fitting(network: torch.nn.Module, state: dict[str, torch.Tensor]) -> dict[str, list[str]]:
+    """Load the tensors of ``state`` whose key and shape ``network``'s trainable state has; the rest
+    of the network keeps its fresh weights. Returns ``{"loaded", "fresh", "unused"}``: keys loaded,
+    keys of the network left as they were, keys of ``state`` with no place (or another shape)."""
+    own = network.trainable_state_dict() if hasattr(network, "trainable_state_dict") else network.state_dict()
+    fits = {k: v for k, v in state.items() if k in own and tuple(v.shape) == tuple(own[k].shape)}
+    network.load_state_dict(fits, strict=False)
+    return {"loaded": sorted(fits), "fresh": sorted(set(own) - set(fits)), "unused": sorted(set(state) - set(fits))}

@@ -23,7 +23,7 @@ from dataset.services.evaluations import checkpoint_label, dataset_label
 from dataset.services.jobs import JobContext
 from model import registry
 from model.evaluate import DEFAULT_THRESHOLDS, RESOLUTIONS, EvalOptions, evaluate, iter_reader
-from model.launch import EvaluationLaunch, FieldError, FolderRef
+from model.launch import EvaluationLaunch, FieldError, FolderRef, checkpoint_text
 from model.methods import NETWORK_METHODS, Mono, NetworkRuns, SgbmParams, build_methods, relative_pfm
 from model.report import PredictionWriter, ranked_samples, write_pictures, write_report
 
@@ -38,6 +38,7 @@ class EvalShellOptions:
     data_dir: Path | None = None
     data_format: str | None = None
     checkpoint: Path | None = None
+    checkpoints: dict[str, Path] = field(default_factory=dict)  # a file per network method (report key)
     predictions: Path | None = None
     mono: Path | None = None
     out: Path | None = None
@@ -57,7 +58,11 @@ def evaluation_params(request: EvaluationLaunch, settings: Any, session: Session
     the checkpoint's run) — samples its training never read.
     """
     shell = shell or EvalShellOptions()
+    if "raft_stereo" in request.methods and "raft_stereo" not in request.checkpoints | shell.checkpoints:
+        raise FieldError("checkpoints", "raft-stereo needs its own checkpoint, e.g. imported:raftstereo-sceneflow")
     source = _checkpoint_source(request, settings, session, shell)
+    own = {m: _method_source(request, m, settings, session, shell) for m in request.methods
+           if m in request.checkpoints or m in shell.checkpoints}
     data = _folder_param(request.data, shell.data_dir, settings, "data")
     run = request.run
     if data is None:
@@ -77,36 +82,66 @@ def evaluation_params(request: EvaluationLaunch, settings: Any, session: Session
               "iters": request.iters, "thresholds": [float(t) for t in shell.thresholds],
               "reader_options": dict(shell.reader_options)}
     # Pinned last, once nothing else can refuse the launch: a refused one leaves no pin behind.
+    return {**params, "checkpoint": _pinned(source, "checkpoint") or None,
+            "checkpoints": {m: _pinned(ref, "checkpoints") for m, ref in own.items()}}
+
+
+def _pinned(source: dict[str, Any], field_name: str) -> dict[str, Any]:
+    """A checkpoint source with a run's file pinned (kept from rotation) and named by run, file and step."""
     found = source.get("file")
-    if isinstance(found, registry.CheckpointFile):
-        try:
-            pinned = registry.pin(found)
-        except ValueError as exc:
-            raise FieldError("checkpoint", str(exc)) from None
-        source = {"run": pinned.run, "file": pinned.name, "step": pinned.step}
-    return {**params, "checkpoint": source or None}
+    if not isinstance(found, registry.CheckpointFile):
+        return source
+    try:
+        pinned = registry.pin(found)
+    except ValueError as exc:
+        raise FieldError(field_name, str(exc)) from None
+    return {"run": pinned.run, "file": pinned.name, "step": pinned.step}
+
+
+def _method_source(request: EvaluationLaunch, method: str, settings: Any, session: Session,
+                   shell: EvalShellOptions) -> dict[str, Any]:
+    """The checkpoint of one network method that names its own (the command line's file, or a name)."""
+    if method in shell.checkpoints:
+        return _outside(shell.checkpoints[method], settings)
+    return _named_source(request.checkpoints[method], settings, session, "checkpoints")
+
+
+def _named_source(name: str, settings: Any, session: Session, field_name: str) -> dict[str, Any]:
+    """A checkpoint a request names (:func:`model.registry.resolve`): ``{"run", "file": CheckpointFile}``
+    for a run's, ``{"name", "path"}`` for an imported one (its "path" is the name too: answers show
+    it, and it is no server path)."""
+    try:
+        found = registry.resolve(settings, name)
+        if found.run is None:
+            return {"name": found.name, "path": found.name}
+        run = training.get_run(session, found.run)
+        file = registry.run_checkpoint(settings.runs_dir, run.id, name.split(":", 1)[1], best_step=run.best_step)
+    except (NotFound, InvalidInput) as exc:
+        raise FieldError(field_name, str(exc)) from None
+    return {"run": file.run, "file": file}
 
 
 def _checkpoint_source(request: EvaluationLaunch, settings: Any, session: Session,
                        shell: EvalShellOptions) -> dict[str, Any]:
-    """Which checkpoint the network methods use, not yet pinned: ``{"run", "file": CheckpointFile}``
-    for a run's, ``{"path"}`` (and its ``run`` when it lies in one) for the command line's or an
-    outside current model; ``{}`` when no method needs one."""
-    if not request.needs_network:
+    """Which checkpoint the network methods without their own use, not yet pinned: ``{"run", "file":
+    CheckpointFile}`` for a run's, ``{"name", "path"}`` for an imported one, ``{"path"}`` (and its
+    ``run`` when it lies in one) for the command line's or an outside current model; ``{}`` when no
+    method needs one."""
+    if not any(m in NETWORK_METHODS and m not in request.checkpoints and m not in shell.checkpoints
+               for m in request.methods):
         return {}
     if shell.checkpoint is not None:
         return _outside(shell.checkpoint, settings)
     if request.checkpoint is not None:
-        run_id, which = request.checkpoint.run, request.checkpoint.checkpoint
-    else:
-        current = registry.current_reference(settings)
-        if current is None:
-            outside = registry.current_checkpoint(settings)
-            if outside is None:
-                raise FieldError("checkpoint", "fusion, stereo and mono-align need a checkpoint: name a run's, "
-                                               "or promote a run to the current model")
-            return _outside(outside, settings)
-        run_id, which = current
+        return _named_source(checkpoint_text(request.checkpoint), settings, session, "checkpoint")
+    current = registry.current_reference(settings)
+    if current is None:
+        outside = registry.current_checkpoint(settings)
+        if outside is None:
+            raise FieldError("checkpoint", "fusion, stereo and mono-align need a checkpoint: name a run's, "
+                                           "or promote a run to the current model")
+        return _outside(outside, settings)
+    run_id, which = current
     try:
         run = training.get_run(session, run_id)
         found = registry.run_checkpoint(settings.runs_dir, run.id, which, best_step=run.best_step)
@@ -158,6 +193,8 @@ def checkpoint_of(ref: dict[str, Any] | None, settings: Any) -> Path | None:
     """A checkpoint parameter's file: a run's checkpoint by name (never a link), or the command line's path."""
     if ref is None:
         return None
+    if "name" in ref:
+        return registry.resolve(settings, ref["name"]).path
     if "path" in ref:
         return Path(ref["path"])
     return registry.run_checkpoint(settings.runs_dir, int(ref["run"]), ref["file"], best_step=ref.get("step")).path
@@ -192,12 +229,15 @@ def evaluate_job(ctx: JobContext) -> dict[str, Any]:
     ctx.log(f"{len(reader)} samples of {label} ({p['format']}), methods {', '.join(p['methods'])}, "
             f"{p['resolution']} resolution")
     mono_dir, checkpoint = folder_of(p["mono"], settings), checkpoint_of(p["checkpoint"], settings)
+    own = p.get("checkpoints") or {}  # evaluations of earlier releases have one checkpoint for all
+    paths = {m: checkpoint_of(ref, settings) for m, ref in own.items()}
     runs = (NetworkRuns(checkpoint, settings.device, Mono(mono_dir), p["iters"], label=checkpoint_label(p["checkpoint"]))
-            if checkpoint and any(m in NETWORK_METHODS for m in p["methods"]) else None)
+            if checkpoint and any(m in NETWORK_METHODS and m not in own for m in p["methods"]) else None)
     methods = build_methods(
         p["methods"], checkpoint=checkpoint, predictions=folder_of(p["predictions"], settings), mono_dir=mono_dir,
         align_rule=p["align"], sgbm=SgbmParams(max_disparity=p["max_disparity"]), device=settings.device,
-        iters=p["iters"], runs=runs)
+        iters=p["iters"], runs=runs, checkpoints=paths,
+        labels={str(paths[m]): checkpoint_label(ref) or m for m, ref in own.items()})
     writer = PredictionWriter(out, kitti_png=p["kitti_png"])
     seen = SeenSamples(writer, runs)
     report = evaluate(
@@ -206,7 +246,8 @@ def evaluate_job(ctx: JobContext) -> dict[str, Any]:
         total=len(reader), dataset=label,
         on_progress=lambda i, n: ctx.progress(0.95 * i / n),
         on_prediction=seen, on_failure=lambda s, m, why: ctx.log(f"skipped {s} {m}: {why}"))
-    report["params"] = {"format": p["format"], "checkpoint": checkpoint_label(p["checkpoint"]), "align": p["align"],
+    report["params"] = {"format": p["format"], "checkpoint": checkpoint_label(p["checkpoint"]),
+                        "checkpoints": {m: checkpoint_label(ref) for m, ref in own.items()}, "align": p["align"],
                         "max_disparity": p["max_disparity"], "iters": p["iters"], "run": p["run"]}
     if "sgbm" in p["methods"]:
         report["sgbm"] = SgbmParams(max_disparity=p["max_disparity"]).__dict__

@@ -71,7 +71,7 @@ class GlobalFusion(nn.Module):
         super().__init__()
         dim = config.fusion_dim
         self.rule, self.kernel = config.fusion_rule, config.fusion_pool_kernel
-        self.factor = 2**config.n_downsample
+        self.factor, self.border = 2**config.n_downsample, config.upsample_border
         # Convolutions on [D_m, D_s] (and the least-squares fit) predict s_m, t_m as corrections to the
         # per-image least-squares solution, in units of the image's disparity spread: ≈ 0 at start.
         self.affine = nn.Sequential(nn.Conv2d(3, dim, 3, padding=1), nn.ReLU(inplace=True),
@@ -98,10 +98,10 @@ class GlobalFusion(nn.Module):
         aligned = scale * mono + shift
         blend = confidence * stereo + (1 - confidence) * aligned
         if self.rule == "released":
-            return FusionResult(convex_upsample(blend, stereo_mask, self.factor), scale, shift)
+            return FusionResult(convex_upsample(blend, stereo_mask, self.factor, self.border), scale, shift)
         features = self.fuse(torch.cat([aligned / spread, stereo / spread, confidence, hidden], dim=1))
         low = blend + self.residual(features) * spread
-        return FusionResult(convex_upsample(low, self.mask(features), self.factor), scale, shift)
+        return FusionResult(convex_upsample(low, self.mask(features), self.factor, self.border), scale, shift)
 
 
 def _near_zero(conv: nn.Conv2d) -> None:

@@ -39,7 +39,7 @@ from model.launcher import (
     stop_recorded,
     torchrun_command,
 )
-from model.presets import PRESETS, Config, load_preset
+from model.presets import ALL_PRESETS, Config, load_preset
 from model.train.spec import BACKBONES, read_run, with_backbones
 
 POLL_S = 1.0
@@ -90,8 +90,8 @@ class _Exiting:
 
 def resolve_config(preset: str, overrides: dict[str, Any]) -> dict[str, Any]:
     """The run's config from a preset and dotted overrides; a bad name or value is a one-line error."""
-    if preset not in PRESETS:
-        raise InvalidInput(f"preset {preset!r}: expected one of {', '.join(PRESETS)}")
+    if preset not in ALL_PRESETS:
+        raise InvalidInput(f"preset {preset!r}: expected one of {', '.join(ALL_PRESETS)}")
     try:
         return load_preset(preset, overrides).to_dict()
     except ValueError as exc:
@@ -165,6 +165,14 @@ def preflight(config: Config, launch: Mapping[str, Any], run_dir: Path, settings
         init = read_run(run_dir).init_checkpoint
     except ValueError:  # the engine says what is wrong with run.json, in the run's end event
         init = None
+    stereo = launch.get("init_stereo")
+    if stereo is not None:
+        from model.train.checkpoints import check_stereo_init  # torch, only for a run that starts from a checkpoint
+
+        try:
+            check_stereo_init(read_run(run_dir).init_stereo, label=str(stereo))
+        except ValueError as exc:
+            raise FieldError("init_stereo", str(exc)) from None
     if init is not None:
         from model.train.checkpoints import check_init  # torch, only for a run that starts from a checkpoint
 

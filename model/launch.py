@@ -18,7 +18,9 @@ from pydantic import (
     BaseModel,
     BeforeValidator,
     ConfigDict,
+    Discriminator,
     Field,
+    Tag,
     ValidationError,
     ValidationInfo,
     field_validator,
@@ -31,10 +33,11 @@ from dataset.services.errors import FieldError, InvalidInput
 from dataset.services.training import DEFAULT_SPLIT, SAMPLE_KINDS, parse_split
 from dataset.services.validate import DB_INT_MAX
 from dataset.settings import DATASET_ROOT_NAME
+from model import registry
 from model.align import ALIGN_RULES
 from model.evaluate import RESOLUTIONS
 from model.methods import METHODS, NETWORK_METHODS, method_key
-from model.presets import Config, load_preset
+from model.presets import ALL_PRESETS, PRESETS, Config, load_preset
 from model.train.spec import BACKBONES
 
 MAX_STEPS = 1_000_000  # 10× the paper's 100k
@@ -56,11 +59,31 @@ class _Strict(BaseModel):
 
 
 class CheckpointRef(_Strict):
-    """A run's checkpoint by name: ``best``, ``last`` or a file of its checkpoint list."""
+    """A run's checkpoint by name: ``best``, ``last`` or a file of its checkpoint list (the object form
+    of ``RUN:NAME``, which earlier releases' forms send)."""
 
     run: Id
     checkpoint: str = Field("best", pattern=_CHECKPOINT_NAME,
                             description="best, last, or a file name from the run's checkpoints")
+
+    @property
+    def name(self) -> str:
+        """The same checkpoint as :func:`model.registry.resolve` names it (``3:best``)."""
+        return f"{self.run}:{self.checkpoint}"
+
+
+# What model.registry.resolve takes from a request (never a path): RUN:NAME or imported:NAME.
+_NAMED = r"^([1-9][0-9]{0,9}:(best|last|best\.pt|(step|best_step)_[0-9]{7,12}\.pt)|imported:[A-Za-z0-9][A-Za-z0-9._-]{0,63})$"
+_IMPORTED = r"^imported:[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
+CheckpointName = Annotated[str, Field(pattern=_NAMED, description=registry.NAME_HINT)]
+_TAGS = ("checkpoint-name", "checkpoint-object")  # which form a checkpoint came in: no field of its own
+Checkpoint = Annotated[Annotated[CheckpointName, Tag(_TAGS[0])] | Annotated[CheckpointRef, Tag(_TAGS[1])],
+                       Discriminator(lambda v: _TAGS[1] if isinstance(v, dict | CheckpointRef) else _TAGS[0])]
+
+
+def checkpoint_text(ref: Checkpoint) -> str:
+    """A checkpoint of a request as one name for :func:`model.registry.resolve`."""
+    return ref.name if isinstance(ref, CheckpointRef) else ref
 
 
 class FolderRef(_Strict):
@@ -94,7 +117,7 @@ Method = Annotated[Literal[tuple(sorted({*METHODS, *(m.replace("_", "-") for m i
 _RETIRED = {
     "data_root": "name a registered dataset root instead: data = {root, path, format}",
     "format": "give the folder's format inside data = {root, path, format}",
-    "init_checkpoint": "name a run's checkpoint instead: init = {run, checkpoint}",
+    "init_checkpoint": "name a run's checkpoint instead: init = RUN:NAME (or imported:NAME)",
     "nnodes": "multi-node runs are launched from the command line",
     "rdzv_endpoint": "multi-node runs are launched from the command line",
     "out": "reports are written to the workspace",
@@ -134,7 +157,7 @@ def backbone_dirs(config: Config, settings: Any) -> dict[str, str]:
 class RunLaunch(_Strict):
     """A training run: preset and training overrides, processes and devices, data, start weights."""
 
-    preset: Literal["lite", "paper"] = "lite"
+    preset: Literal[tuple(ALL_PRESETS)] = "lite"  # type: ignore[valid-type]
     steps: int | None = Field(None, ge=1, le=MAX_STEPS, description="training steps (preset's by default)")
     batch: int | None = Field(None, ge=1, le=MAX_BATCH, description="global batch size")
     lr: float | None = Field(None, gt=0, le=1, description="peak learning rate")
@@ -151,7 +174,11 @@ class RunLaunch(_Strict):
     kinds: list[Literal[SAMPLE_KINDS]] = Field(default_factory=list, max_length=len(SAMPLE_KINDS))  # type: ignore[valid-type]
     qa_ok: bool = False
     data: FolderData | None = Field(None, description="a dataset folder instead of the database's accepted samples")
-    init: CheckpointRef | None = Field(None, description="start from this checkpoint's weights (fine-tuning)")
+    init: Checkpoint | None = Field(None, description="start from this checkpoint's weights (fine-tuning): "
+                                                       "RUN:NAME, imported:NAME, or {run, checkpoint}")
+    init_stereo: str | None = Field(None, pattern=_IMPORTED, description="start the paper network's stereo branch from this "
+                                                                 "RAFT-Stereo checkpoint (imported:NAME): the tensors "
+                                                                 "that fit load, the rest start fresh")
 
     @model_validator(mode="before")
     @classmethod
@@ -191,6 +218,14 @@ class RunLaunch(_Strict):
         return self
 
     @model_validator(mode="after")
+    def _stereo_start(self) -> RunLaunch:
+        if self.init_stereo is not None and self.preset not in PRESETS:
+            raise FieldError("init_stereo", f"{self.preset} is RAFT-Stereo's own network: start it with init")
+        if self.init_stereo is not None and self.init is not None:
+            raise FieldError("init_stereo", "init already starts every weight: choose one of init and init_stereo")
+        return self
+
+    @model_validator(mode="after")
     def _weights_configured(self, info: ValidationInfo) -> RunLaunch:
         # A preset whose backbones load from directories cannot start where no setting names them.
         settings = _settings(info)
@@ -211,8 +246,11 @@ class EvaluationLaunch(_Strict):
     held-out test split of a run)."""
 
     methods: list[Method] = Field(default_factory=list, max_length=len(METHODS), description="methods to score")
-    checkpoint: CheckpointRef | None = Field(None, description="for fusion, stereo and mono-align "
-                                                               "(default: the current model)")
+    checkpoint: Checkpoint | None = Field(None, description="for fusion, stereo and mono-align: RUN:NAME, "
+                                                            "imported:NAME or {run, checkpoint} (default: the current model)")
+    checkpoints: dict[Method, CheckpointName] = Field(  # type: ignore[valid-type]
+        default_factory=dict, max_length=len(NETWORK_METHODS),
+        description="a checkpoint per network method (raft-stereo needs one), over checkpoint")
     run: Id | None = Field(None, description="a run whose held-out test split to evaluate on "
                                              "(default: the checkpoint's run)")
     data: FolderData | None = Field(None, description="a dataset folder instead of a run's test split")
@@ -237,6 +275,9 @@ class EvaluationLaunch(_Strict):
             raise FieldError("methods", "a method is named twice")
         if self.predictions is not None and "predictions" not in self.methods:
             raise FieldError("predictions", "a predictions folder is read only by the predictions method")
+        for method in self.checkpoints:
+            if method not in self.methods or method not in NETWORK_METHODS:
+                raise FieldError("checkpoints", f"{method.replace('_', '-')} is not a network method of this evaluation")
         if self.data is not None and self.run is not None:
             raise FieldError("run", "choose a dataset folder or a run's test split, not both")
         return self
@@ -256,7 +297,7 @@ def validate(schema: type[_Strict], body: Any, settings: Any = None) -> Any:
     except ValidationError as exc:
         error = exc.errors(include_url=False, include_input=False)[0]
         # A list's item is its list's field (what a form marks): crop, not crop.0.
-        field = ".".join(str(p) for p in error["loc"] if not isinstance(p, int))
+        field = ".".join(str(p) for p in error["loc"] if not isinstance(p, int) and p not in _TAGS)
         raise FieldError(field, _reason(error)) from None
 
 
@@ -269,6 +310,8 @@ _WORDS = {"less_than_equal": "must be at most {le}", "less_than": "must be less 
           "too_short": "needs at least {min_length} item(s)", "too_long": "takes at most {max_length} item(s)",
           "missing": "is required"}
 _PATTERNS = {_CHECKPOINT_NAME: "expected best, last or a checkpoint file name such as step_0001000.pt",
+             _NAMED: f"expected {registry.NAME_HINT}",
+             _IMPORTED: "expected imported:NAME (`illusion-studio checkpoints import` adds one)",
              _ROOT: "expected a registered dataset root's name", _DEVICES: "expected auto, cpu, cuda or cuda:0,1"}
 
 

@@ -1,13 +1,15 @@
 """The methods an evaluation compares, each a disparity predictor over :class:`StereoSample`s.
 
 ``fusion``, ``stereo`` and ``mono_align`` share one forward pass of a fusion checkpoint per
-sample; ``mono_gt_align`` and ``sgbm`` need no network (torch loads only when a network method is
-asked for); ``predictions`` reads another program's PFMs.
+sample; ``raft_stereo`` is a stereo-only network's disparity (RAFT-Stereo's, e.g. an imported
+published checkpoint); each network method may have a checkpoint of its own, and methods that share
+one share its forward pass. ``mono_gt_align`` and ``sgbm`` need no network (torch loads only when a
+network method is asked for); ``predictions`` reads another program's PFMs.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -20,8 +22,9 @@ from dataset.readers import SampleError, StereoSample
 from dataset.readers.base import resize_disparity, resize_image
 from model.align import AlignRule, align
 
-METHODS = ("fusion", "stereo", "mono_align", "mono_gt_align", "sgbm", "predictions")
-NETWORK_METHODS = ("fusion", "stereo", "mono_align")
+METHODS = ("fusion", "stereo", "mono_align", "raft_stereo", "mono_gt_align", "sgbm", "predictions")
+NETWORK_METHODS = ("fusion", "stereo", "mono_align", "raft_stereo")
+FUSION_METHODS = ("fusion", "stereo", "mono_align")  # read from one fusion checkpoint's forward pass
 
 
 def method_key(name: str) -> str:
@@ -136,23 +139,40 @@ Predict = Callable[[StereoSample], np.ndarray]
 
 def build_methods(names: list[str], *, checkpoint: Path | None, predictions: Path | None, mono_dir: Path | None,
                   align_rule: AlignRule = "lsq", sgbm: SgbmParams = SgbmParams(), device: str = "cpu",
-                  iters: int | None = None, runs: NetworkRuns | None = None) -> dict[str, Predict]:
+                  iters: int | None = None, runs: NetworkRuns | None = None,
+                  checkpoints: Mapping[str, Path] | None = None,
+                  labels: Mapping[str, str] | None = None) -> dict[str, Predict]:
     """The predictors for ``names`` (report keys), each StereoSample → float32 HxW pixels at the
-    sample's resolution. Raises ValueError naming what a method needs and was not given. ``runs``:
-    a caller's own :class:`NetworkRuns` (to read more of each prediction, e.g. the confidence)."""
+    sample's resolution. Raises ValueError naming what a method needs and was not given. A network
+    method reads ``checkpoints[name]`` when given, else ``checkpoint``; ``runs``: a caller's own
+    :class:`NetworkRuns` of ``checkpoint`` (to read more of each prediction, e.g. the confidence);
+    ``labels``: how messages name each checkpoint file (by path)."""
     mono = Mono(mono_dir)
     methods: dict[str, Predict] = {}
-    if runs is None and any(n in NETWORK_METHODS for n in names):
-        if checkpoint is None:
-            raise ValueError("fusion, stereo and mono-align need a checkpoint (--checkpoint, or promote a run)")
-        runs = NetworkRuns(checkpoint, device, mono, iters)
+    networks: dict[Path, NetworkRuns] = {checkpoint: runs} if runs is not None and checkpoint is not None else {}
+
+    def network(name: str) -> NetworkRuns:
+        path = (checkpoints or {}).get(name) or checkpoint
+        if path is None and runs is not None:
+            return runs
+        if path is None:
+            raise ValueError(f"{name.replace('_', '-')} needs a checkpoint (--checkpoint, or promote a run)")
+        if path not in networks:  # methods naming one checkpoint share its forward pass
+            networks[path] = NetworkRuns(path, device, mono, iters, label=(labels or {}).get(str(path)))
+        if name == "raft_stereo" and networks[path].config.model.architecture != "raft-stereo":
+            raise ValueError("raft-stereo scores a RAFT-Stereo network's checkpoint (an imported one, or a "
+                             "raft-stereo run's), not a fusion network's")
+        return networks[path]
+
     for name in names:
         if name == "fusion":
-            methods[name] = lambda s, r=runs: r(s).disparity
+            methods[name] = lambda s, r=network(name): r(s).disparity
         elif name == "stereo":
-            methods[name] = lambda s, r=runs: r(s).stereo
+            methods[name] = lambda s, r=network(name): r(s).stereo
         elif name == "mono_align":
-            methods[name] = lambda s, r=runs: r(s).mono_align
+            methods[name] = lambda s, r=network(name): r(s).mono_align
+        elif name == "raft_stereo":
+            methods[name] = lambda s, r=network(name): r(s).disparity
         elif name == "mono_gt_align":
             methods[name] = lambda s: _gt_aligned(s, mono(s), align_rule)
         elif name == "sgbm":

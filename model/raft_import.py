@@ -227,3 +227,86 @@ def import_file(path: Path, destination: Path) -> dict[str, Any]:
     return {"architecture": conversion.architecture, "keys_loaded": len(conversion.network.state_dict()),
             "tensors_in_file": conversion.tensors_in_file, "duplicates": conversion.duplicates,
             "unused": conversion.unused}
+
+
+# --- the raft-stereo network's weights → the fusion network's stereo branch (init_stereo) ---------
+
+_MOTION_IN = 64  # RAFT-Stereo's motion encoder width (convc2, convf2 outputs)
+_MOTION_OUT = 126  # its motion features; then flow x, flow y
+
+
+def _stereo_key(key: str) -> str | None:
+    """The fusion network's key for a raft-stereo network key; None where the fusion network has no
+    counterpart (RAFT-Stereo's image context encoder ``cnet``: the fusion network's context comes from
+    the mono branch)."""
+    if not key.startswith(PREFIX) or key.startswith(f"{PREFIX}cnet."):
+        return None
+    rest = key[len(PREFIX):]
+    rest = re.sub(r"^zqr\.", "context.zqr.", rest)
+    rest = re.sub(r"^update\.grus\.(\d+)\.", r"update.gru\1.", rest)
+    rest = re.sub(r"^update\.flow_head\.", "update.disp_head.", rest)
+    return PREFIX + rest
+
+
+def _padded(source: Tensor, shape: torch.Size, cols: list[tuple[slice, slice]] | None = None) -> Tensor:
+    """A zero tensor of ``shape`` with ``source`` in its first rows (and, for a weight, its input
+    columns moved: (source columns, target columns) pairs): zero rows and columns keep the extra
+    channels out of every output, so the wider layer computes what the narrower one did."""
+    out = torch.zeros(shape, dtype=source.dtype)
+    if cols is None:
+        out[: source.shape[0]] = source
+    for theirs, ours in cols or []:
+        out[: source.shape[0], ours] = source[:, theirs]
+    return out
+
+
+def _changed(key: str, tensor: Tensor, shape: torch.Size) -> Tensor | None:
+    """``tensor`` (the raft-stereo network's, under the fusion key ``key``) changed to the fusion
+    network's layout where DESIGN.md "Facts about RAFT-Stereo's published checkpoints" says how —
+    the motion encoder zero-padded with flow x negated into disparity and flow y dropped, ``gru0``'s
+    motion columns [126 features | flow x, flow y] moved to [features, 0… | −flow x], the head's row 0
+    negated — or as it is when the shapes agree; None when it does not fit (a narrower network)."""
+    motion = f"{PREFIX}update.motion."
+    try:
+        if key in (f"{PREFIX}update.disp_head.2.weight", f"{PREFIX}update.disp_head.2.bias"):
+            fitted = -tensor[:1]  # disparity = −flow x
+        elif key.startswith(motion) and tensor.dim() == 1:
+            fitted = _padded(tensor, shape)
+        elif key == f"{motion}disp.0.weight":
+            fitted = _padded(-tensor[:, :1], shape)  # flow x = −disparity; flow y is 0 in stereo
+        elif key == f"{motion}out.weight":
+            half = shape[1] // 2  # ours: [correlation | disparity] features, motion_dim each
+            fitted = _padded(tensor, shape, cols=[(slice(0, _MOTION_IN), slice(0, _MOTION_IN)),
+                                                  (slice(_MOTION_IN, 2 * _MOTION_IN), slice(half, half + _MOTION_IN))])
+        elif key.startswith(motion):
+            fitted = _padded(tensor, shape, cols=[(slice(0, tensor.shape[1]), slice(0, tensor.shape[1]))])
+        elif re.fullmatch(rf"{re.escape(PREFIX)}update\.gru0\.conv[zrq]\.weight", key):
+            hidden, rest = shape[0], tensor.shape[1] - shape[0] - _MOTION_OUT - 2  # rest: the coarser level's state
+            disparity = shape[1] - rest - 1  # ours: [hidden | motion features, 0… | disparity | rest]
+            fitted = torch.zeros(shape, dtype=tensor.dtype)
+            fitted[:, :hidden + _MOTION_OUT] = tensor[:, :hidden + _MOTION_OUT]
+            fitted[:, disparity] = -tensor[:, hidden + _MOTION_OUT]
+            fitted[:, disparity + 1:] = tensor[:, hidden + _MOTION_OUT + 2:]
+        else:
+            fitted = tensor
+    except (RuntimeError, IndexError):  # a narrower fusion network: the tensor does not fit
+        return None
+    return fitted if fitted.shape == shape else None
+
+
+def stereo_branch_state(raft_state: Mapping[str, Tensor], target: Mapping[str, Tensor],
+                        ) -> tuple[dict[str, Tensor], list[str]]:
+    """The tensors of a ``raft-stereo`` network's state (``raft_state``, an imported checkpoint's)
+    that fit the fusion network whose state is ``target``, under its keys and in its layout (see
+    :func:`_changed`), and the keys of ``raft_state`` that have no counterpart or do not fit (RAFT-Stereo's
+    image context encoder always; more for a narrower network)."""
+    fitted: dict[str, Tensor] = {}
+    unused: list[str] = []
+    for key, tensor in raft_state.items():
+        ours = _stereo_key(key)
+        changed = _changed(ours, tensor, target[ours].shape) if ours is not None and ours in target else None
+        if changed is None:
+            unused.append(key)
+        else:
+            fitted[ours] = changed.to(target[ours].dtype)  # type: ignore[index]
+    return fitted, unused

@@ -82,7 +82,7 @@ def test_launch_pins_the_version_splits_by_video_and_writes_run_json(client, tok
 
 
 @pytest.mark.parametrize(("body", "message"), [
-    ({"preset": "huge"}, "preset: must be one of 'lite' or 'paper'"),
+    ({"preset": "huge"}, "preset: must be one of 'lite', 'paper' or 'raft-stereo'"),
     ({"split": "train=0.5,val=0.6"}, "sum to 1"),
     ({"split": "train=0.9,holdout=0.1"}, "'holdout'"),
     ({"split": "train=1"}, "val needs a fraction"),

@@ -62,6 +62,9 @@ class DataSelection:
         return "accepted samples" + "".join(f", {p}" for p in parts if p)
 
 
+INIT_FILE = "init.json"  # RUN_DIR/init.json: the engine's {"loaded", "fresh", "unused"} keys of an init_stereo start
+
+
 @dataclass(frozen=True)
 class Launch:
     """How a run is started: processes per node and devices, and where it starts from."""
@@ -70,6 +73,8 @@ class Launch:
     devices: str = "auto"  # auto, cpu, cuda, cuda:0,1 (the GPUs the trainers may see)
     init_checkpoint: str | None = None  # the file (never shown)
     init_label: str | None = None  # how answers name it: "run 3 · best_step_0000250.pt"
+    init_stereo: str | None = None  # an imported RAFT-Stereo checkpoint the stereo branch starts from (never shown)
+    init_stereo_label: str | None = None  # its name: "imported:raftstereo-sceneflow"
     nnodes: int = 1
     rdzv_endpoint: str | None = None  # host:port of the rendezvous for a multi-node run
     split: dict[str, float] = field(default_factory=dict)
@@ -228,26 +233,27 @@ def create_run(session: Session, media: MediaStore, runs_dir: Path, *, preset: s
     """
     validate_launch(launch)
     splits = split_version(version, launch.split, launch.seed)
-    shown = {**asdict(launch), "init_checkpoint": launch.init_label, "data": asdict(selection)}
+    shown = {**asdict(launch), "init_checkpoint": launch.init_label, "init_stereo": launch.init_stereo_label,
+             "data": asdict(selection)}
     shown["data"]["root"] = selection.label or (Path(selection.root).name if selection.root else None)
-    del shown["init_label"], shown["data"]["label"]
+    del shown["init_label"], shown["init_stereo_label"], shown["data"]["label"]
     run = TrainingRun(preset=preset, config=config, dataset_id=version["id"], dataset=version, splits=splits,
                       launch=shown, created_by_id=user.id if user else None)
     session.add(run)
     session.flush()
     write_run_json(run_dir(runs_dir, run.id), run, media.root, data_root=selection.root,
-                   init_checkpoint=launch.init_checkpoint)
+                   init_checkpoint=launch.init_checkpoint, init_stereo=launch.init_stereo)
     if user is not None:
         audit.record(session, user.id, "run.launch", "run", run.id, preset=preset, dataset=version["id"])
     return run
 
 
 def write_run_json(directory: Path, run: TrainingRun, media_root: Path, *, data_root: str | None,
-                   init_checkpoint: str | None) -> None:
+                   init_checkpoint: str | None, init_stereo: str | None = None) -> None:
     """The engine's input, written once; a retry finds the same file."""
     data = {"format": run.launch["data"]["format"], "root": data_root}
     doc = {"config": run.config, "dataset": run.dataset, "splits": run.splits, "media_root": str(media_root),
-           "init_checkpoint": init_checkpoint, "data": data, "run": run.id,
+           "init_checkpoint": init_checkpoint, "init_stereo": init_stereo, "data": data, "run": run.id,
            "device": engine_device(run.launch.get("devices", "auto"))}
     atomic_write_bytes(directory / "run.json", json.dumps(doc, indent=1).encode())
 
@@ -352,11 +358,28 @@ def run_json(run: TrainingRun, runs_dir: Path, *, current: dict[str, Any] | None
         "created_at": _iso(run.created_at), "started_at": _iso(run.started_at),
         "finished_at": _iso(run.finished_at), "duration_s": duration,
     }
+    if directory is not None and run.launch.get("init_stereo"):
+        data["init"] = init_report(directory, run.launch["init_stereo"])
     if full:
         files = checkpoint_files(directory) if directory is not None else []
         data.update(config=shown(run.config), version=run.dataset, splits=run.splits,
                     checkpoints=[{k: v for k, v in f.items() if k != "path"} for f in files])
     return data
+
+
+def init_report(directory: Path, source: str) -> dict[str, Any]:
+    """Which tensors of a run's network came from the checkpoint ``source`` (an ``init_stereo``
+    start) and which started fresh: counts and key lists from the engine's ``init.json``, or only
+    the source while the engine has not started."""
+    report: dict[str, Any] = {"source": source}
+    try:
+        doc = json.loads((directory / INIT_FILE).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return report
+    for part in ("loaded", "fresh", "unused"):
+        keys = [str(k) for k in doc.get(part, [])] if isinstance(doc, dict) else []
+        report[part], report[f"{part}_keys"] = len(keys), keys
+    return report
 
 
 def _iso(value: Any) -> str | None:

@@ -65,6 +65,19 @@ def check_init(path: Path, config: Config, label: str) -> None:
         raise ValueError(f"{label}: its model config differs from the run's in {', '.join(differ)}")
 
 
+def check_stereo_init(path: Path | None, label: str) -> None:
+    """Refuse (ValueError, the file named by ``label``) what a stereo branch cannot start from: a file
+    that does not load weights-only, has non-finite weights, or holds no RAFT-Stereo network."""
+    if path is None:
+        raise ValueError(f"{label}: run.json names no file to start the stereo branch from")
+    payload = load_checkpoint(path, label=label)
+    if not weights_finite(payload):
+        raise ValueError(f"{label} has non-finite weights; start from another checkpoint")
+    if (payload.get("config", {}).get("model") or {}).get("architecture") != "raft-stereo":
+        raise ValueError(f"{label} is not a RAFT-Stereo network's checkpoint (import one with "
+                         "`illusion-studio checkpoints import --from raft-stereo FILE`)")
+
+
 def kept_by_product(run_dir: Path) -> set[Path] | None:
     """The resolved paths ``keep.json`` lists (relative ones from RUN_DIR); None when the file
     exists but cannot be read, which means: delete nothing."""

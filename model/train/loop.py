@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import json
 import math
 import time
 from pathlib import Path
@@ -30,7 +31,9 @@ import torch
 from torch import nn
 from torch.nn.parallel import DistributedDataParallel
 
-from model.checkpoint import load_checkpoint, load_network, save_checkpoint
+from dataset.atomic import atomic_write_bytes
+from dataset.services.training import INIT_FILE
+from model.checkpoint import load_checkpoint, load_fitting, load_network, save_checkpoint
 from model.data import open_split, training_loader
 from model.losses import fusion_loss
 from model.network import FusionNetwork, FusionOutput
@@ -38,6 +41,7 @@ from model.presets import Config
 from model.train import CANCEL_FILE
 from model.train.checkpoints import (
     best_path,
+    check_stereo_init,
     copy_atomic,
     model_differences,
     prune,
@@ -125,6 +129,8 @@ class Trainer:
     def _network(self, resume: Path | None) -> tuple[FusionNetwork, dict[str, Any] | None]:
         """The network to train: the resumed checkpoint's, the init checkpoint's weights, or fresh."""
         source = resume or self.spec.init_checkpoint
+        if source is None and self.spec.init_stereo is not None:
+            return self._stereo_started(self.spec.init_stereo), None
         if source is None:
             return FusionNetwork(self.config.model).to(self.device), None
         network, stored, payload = load_network(source, device=str(self.device))
@@ -132,6 +138,21 @@ class Trainer:
         if differ:
             raise ValueError(f"{source}: its model config differs from run.json's in {', '.join(differ)}")
         return network, payload if resume is not None else None
+
+    def _stereo_started(self, path: Path) -> FusionNetwork:
+        """A fresh network whose stereo branch starts from the imported RAFT-Stereo checkpoint
+        ``path``: the tensors that fit load (:func:`model.raft_import.stereo_branch_state`), the rest
+        start fresh; rank 0 records which in ``RUN_DIR/init.json`` for the run page."""
+        from model.raft_import import stereo_branch_state
+
+        check_stereo_init(path, label=path.name)
+        payload = load_checkpoint(path, label=path.name)
+        network = FusionNetwork(self.config.model)
+        fitted, unused = stereo_branch_state(payload["state"], network.trainable_state_dict())
+        report = {**load_fitting(network, fitted), "unused": unused}
+        if self.world.is_main:
+            atomic_write_bytes(self.run_dir / INIT_FILE, json.dumps(report, indent=1).encode())
+        return network.to(self.device)
 
     def _restore(self, path: Path, payload: dict[str, Any] | None) -> None:
         """Continue from ``path``: optimiser, schedule, scaler, step, best EPE and RNG states."""

@@ -35,6 +35,7 @@ class RunSpec:
     splits: dict[str, list[Any]]
     media_root: Path | None
     init_checkpoint: Path | None
+    init_stereo: Path | None  # an imported RAFT-Stereo checkpoint the stereo branch starts from
     device: str | None  # "cpu", "cuda", "cuda:N"; None: CUDA when available
     workers: int  # DataLoader worker processes per rank
 
@@ -79,6 +80,7 @@ def read_run(run_dir: Path) -> RunSpec:
         dataset=raw.get("dataset"), splits={name: list(splits.get(name) or []) for name in SPLITS},
         media_root=Path(raw["media_root"]) if raw.get("media_root") else None,
         init_checkpoint=Path(raw["init_checkpoint"]) if raw.get("init_checkpoint") else None,
+        init_stereo=Path(raw["init_stereo"]) if raw.get("init_stereo") else None,
         device=raw.get("device"), workers=workers,
     )
 

@@ -42,9 +42,10 @@ function launchBody() {
   } else if (f.run.value) {
     body.run = Number(f.run.value);
   }
-  if (f.checkpoint.value) {
-    const [run, checkpoint] = f.checkpoint.value.split(":");
-    body.checkpoint = { run: Number(run), checkpoint };
+  // Checkpoints by name, as `predict --checkpoint` takes them; raft-stereo scores its own.
+  if (f.checkpoint.value) body.checkpoint = f.checkpoint.value;
+  if (body.methods.includes("raft_stereo") && f.raft_stereo_checkpoint.value) {
+    body.checkpoints = { raft_stereo: f.raft_stereo_checkpoint.value };
   }
   if (body.methods.includes("predictions")) {
     body.predictions = { root: f.predictions_root.value, path: f.predictions_path.value.trim() };
@@ -55,7 +56,9 @@ function launchBody() {
 // The fields of the chosen samples, and the predictions folder only when its method is ticked.
 function showParts() {
   for (const part of form.querySelectorAll("[data-source]")) part.hidden = part.dataset.source !== form.elements.source.value;
-  form.querySelector("[data-needs=predictions]").hidden = !form.querySelector("input[value=predictions]").checked;
+  for (const part of form.querySelectorAll("[data-needs]")) {
+    part.hidden = !form.querySelector(`input[name=methods][value=${part.dataset.needs}]`).checked;
+  }
 }
 form.addEventListener("change", showParts);
 showParts();
@@ -68,7 +71,8 @@ form.addEventListener("submit", async (event) => {
 
 keyboardHelp([], {
   note: "Score methods on a run's held-out test split (samples its training never read) or on a folder inside a " +
-    "registered dataset root. fusion, stereo and mono-align use the chosen checkpoint; best and last are pinned to " +
+    "registered dataset root. fusion, stereo and mono-align use the chosen checkpoint, raft-stereo its own (an imported " +
+    "RAFT-Stereo checkpoint, or a raft-stereo run's); best and last are pinned to " +
     "their step when the evaluation is launched. A refused launch names its field under it.",
 });
 

@@ -54,10 +54,9 @@ function launchBody() {
     if (value !== null) body[name] = value;
   }
   if (f.crop.value.trim()) body.crop = f.crop.value.trim();
-  if (f.init.value) {
-    const [run, checkpoint] = f.init.value.split(":");
-    body.init = { run: Number(run), checkpoint };
-  }
+  // Checkpoints by name, as `predict --checkpoint` takes them: RUN:NAME or imported:NAME.
+  if (f.init.value) body.init = f.init.value;
+  if (f.init_stereo.value) body.init_stereo = f.init_stereo.value;
   if (f.source.value === "folder") {
     body.data = { root: f.data_root.value, path: f.data_path.value.trim(), format: f.data_format.value };
     return body;

@@ -66,6 +66,17 @@ function showCheckpoints(files) {
     el("td", {}, `${(f.bytes / 2 ** 20).toFixed(1)} MiB`))) : [el("tr", {}, el("td", { colSpan: 3 }, "None yet."))]));
 }
 
+// An init_stereo start: how many tensors came from the file and which started fresh (once the engine has said).
+function showInit(init) {
+  if (!init || init.loaded == null || !$("run-init") || !$("init-details").hidden) return;
+  $("init-counts").textContent = `: ${init.loaded} tensors from the file, ${init.fresh} started fresh, ` +
+    `${init.unused} of the file's without a place here.`;
+  for (const part of ["loaded", "fresh", "unused"]) {
+    $(`init-${part}`).replaceChildren(...init[`${part}_keys`].map((key) => el("li", {}, el("code", {}, key))));
+  }
+  $("init-details").hidden = false;
+}
+
 function showRun(run) {
   $("run-state").textContent = run.state;
   $("run-state").className = `state ${run.state}`;
@@ -89,6 +100,7 @@ function showRun(run) {
   }
   showValidation(run.last_val);
   showCheckpoints(run.checkpoints);
+  showInit(run.init);
 }
 
 const LOG_LINES = 400;

@@ -169,11 +169,14 @@ def memory_benchmark(as_json: bool) -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("--repeats", type=click.IntRange(min=1), default=2, show_default=True)
 @click.option("--train-steps", type=click.IntRange(min=1), default=3, show_default=True)
-def model_benchmark(as_json: bool, repeats: int, train_steps: int) -> None:
-    """The lite fusion model on a 1080p pair (own process: seconds, peak MB) beside OpenCV SGBM; parameters; train steps/s."""
+@click.option("--no-raft-stereo", "no_raft_stereo", is_flag=True,
+              help="Skip RAFT-Stereo's network (32 iterations at 1080p: minutes on a CPU).")
+def model_benchmark(as_json: bool, repeats: int, train_steps: int, no_raft_stereo: bool) -> None:
+    """The lite fusion model on a 1080p pair (own process: seconds, peak MB) beside OpenCV SGBM and RAFT-Stereo's
+    network; parameters; train steps/s."""
     from webapp.benchmarks.model import run_model_bench
 
-    _report(run_model_bench(repeats=repeats, train_steps=train_steps), as_json)
+    _report(run_model_bench(repeats=repeats, train_steps=train_steps, raft_stereo=not no_raft_stereo), as_json)
 
 
 @bench.command("fusion")

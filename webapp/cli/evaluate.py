@@ -4,16 +4,18 @@ training run's held-out test split, as a job (queued, ``--wait`` or ``--here``).
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import click
 
 from dataset.readers import READER_FORMATS
 from dataset.services.evaluations import dataset_label
+from model import registry
 from model.align import ALIGN_RULES
 from model.evaluate import RESOLUTIONS
 from model.evaluation import DEFAULT_METHODS, EvalShellOptions, evaluation_params, report_dir
 from model.launch import EvaluationLaunch, validate
-from model.methods import METHODS
+from model.methods import METHODS, method_key
 from webapp.cli.errors import service_errors
 from webapp.cli.running import run_job, run_options
 from webapp.cli.state import CliState, pass_state
@@ -27,8 +29,9 @@ METHOD_CHOICES = [m.replace("_", "-") for m in METHODS] + list(METHODS)
 @click.option("--format", "fmt", type=click.Choice(READER_FORMATS), help="The layout of --data.")
 @click.option("--method", "methods", multiple=True, type=click.Choice(METHOD_CHOICES),
               help=f"Repeatable (default: {', '.join(m.replace('_', '-') for m in DEFAULT_METHODS)}).")
-@click.option("--checkpoint", type=click.Path(exists=True, dir_okay=False, path_type=Path),
-              help="A fusion checkpoint (default: the workspace's current model).")
+@click.option("--checkpoint", "checkpoints", multiple=True, metavar="[METHOD=]CHECKPOINT",
+              help="RUN:NAME, imported:NAME or a file: the network methods' (default: the current model); "
+                   "METHOD=… gives one method its own, e.g. raft-stereo=imported:raftstereo-sceneflow. Repeatable.")
 @click.option("--run", "run_id", type=int, help="A training run whose test split to evaluate on.")
 @click.option("--predictions", type=click.Path(exists=True, file_okay=False, path_type=Path),
               help="PFMs of another program: DIR/REL/x.pfm for left image REL/x.png (any resolution).")
@@ -48,7 +51,7 @@ METHOD_CHOICES = [m.replace("_", "-") for m in METHODS] + list(METHODS)
 @run_options
 @pass_state
 def evaluate_cmd(state: CliState, data: Path | None, fmt: str | None, methods: tuple[str, ...],
-                 checkpoint: Path | None, run_id: int | None, predictions: Path | None, mono: Path | None,
+                 checkpoints: tuple[str, ...], run_id: int | None, predictions: Path | None, mono: Path | None,
                  resolution: str | None, align_rule: str, max_disparity: int | None, iters: int | None,
                  min_disparity: float | None, kitti_png: bool, out: Path | None, as_json: bool,
                  wait: bool, here: bool) -> None:
@@ -58,7 +61,10 @@ def evaluate_cmd(state: CliState, data: Path | None, fmt: str | None, methods: t
     rt = state.runtime
     body = {"methods": list(methods) or list(DEFAULT_METHODS), "run": run_id, "resolution": resolution,
             "align": align_rule, "max_disparity": max_disparity, "kitti_png": kitti_png, "iters": iters}
-    shell = EvalShellOptions(data_dir=data, data_format=fmt, checkpoint=checkpoint, predictions=predictions,
+    named, files = _checkpoint_options(checkpoints)
+    body.update(named)
+    shell = EvalShellOptions(data_dir=data, data_format=fmt, checkpoint=files.pop("", None), checkpoints=files,
+                             predictions=predictions,
                              mono=mono, out=out,
                              reader_options={"min_disparity": min_disparity} if min_disparity is not None else {})
     with service_errors(), rt.sessions() as s:
@@ -73,3 +79,29 @@ def evaluate_cmd(state: CliState, data: Path | None, fmt: str | None, methods: t
             click.echo((out / "report.json").read_text())
         else:
             click.echo(f"report: {out / 'index.html'}")
+
+
+def _checkpoint_options(values: tuple[str, ...]) -> tuple[dict[str, Any], dict[str, Path]]:
+    """``--checkpoint`` values as the request's names (``checkpoint``, ``checkpoints``) and the
+    command line's own files by method (``""``: the default one). UsageError for a method given twice
+    or a path that is no file."""
+    named: dict[str, Any] = {}
+    files: dict[str, Path] = {}
+    for value in values:
+        method, _, text = value.rpartition("=") if "=" in value.split(":", 1)[0] else ("", "", value)
+        try:
+            key = method_key(method) if method else ""
+        except ValueError as exc:
+            raise click.UsageError(f"--checkpoint {value}: {exc}") from None
+        if key in files or (key == "" and "checkpoint" in named) or key in named.get("checkpoints", {}):
+            raise click.UsageError(f"--checkpoint gives {method or 'the default'} twice")
+        if registry.is_name(text):
+            if key:
+                named.setdefault("checkpoints", {})[key] = text
+            else:
+                named["checkpoint"] = text
+        elif Path(text).is_file():
+            files[key] = Path(text)
+        else:
+            raise click.UsageError(f"--checkpoint {value}: {text} is no file, nor RUN:NAME or imported:NAME")
+    return named, files

@@ -17,7 +17,7 @@ from dataset.services import training
 from model import registry
 from model.launch import RunLaunch, backbone_dirs, validate
 from model.launcher import engine_options
-from model.presets import load_preset
+from model.presets import ALL_PRESETS, load_preset
 from webapp.cli.errors import service_errors
 from webapp.cli.state import CliState, pass_state
 from webapp.jobs import runs as run_control
@@ -48,7 +48,8 @@ WHOLE = WholeNumber()
 
 
 @click.command()
-@click.option("--preset", default="lite", show_default=True, type=click.Choice(["lite", "paper"]))
+@click.option("--preset", default="lite", show_default=True, type=click.Choice(ALL_PRESETS),
+              help="A fusion preset, or raft-stereo: RAFT-Stereo's own network, the stereo-only baseline.")
 @click.option("--steps", type=WHOLE, help="Training steps (preset's by default).")
 @click.option("--batch", type=WHOLE, help="Global batch size.")
 @click.option("--lr", type=click.FloatRange(min=0, min_open=True), help="Peak learning rate (OneCycle).")
@@ -72,24 +73,32 @@ WHOLE = WholeNumber()
 @click.option("--split", default=training.DEFAULT_SPLIT, show_default=True,
               help="Fractions of videos in train/val/test; no video is in two splits.")
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(0), help="Split, init and data-order seed.")
-@click.option("--init", "init_checkpoint", type=click.Path(dir_okay=False, path_type=Path),
-              help="Start from this checkpoint's weights (fine-tuning; not a resume).")
+@click.option("--init", "init_checkpoint", metavar="CHECKPOINT",
+              help="Start from this checkpoint's weights (fine-tuning; not a resume): RUN:NAME, imported:NAME or a file.")
+@click.option("--init-stereo", metavar="imported:NAME",
+              help="Start a fusion preset's stereo branch from an imported RAFT-Stereo checkpoint (the tensors that fit).")
 @click.option("--wait", is_flag=True, help="Wait for the run to end; exit non-zero unless it succeeds.")
 @click.option("--json", "as_json", is_flag=True, help="Print the run as one JSON object.")
 @pass_state
 def train(state: CliState, preset: str, steps: int | None, batch: int | None, lr: float | None, crop: str | None,
           iters: int | None, devices: str, nproc: int, nnodes: int, rdzv_endpoint: str | None,
           video_ids: tuple[int, ...], illusion_types: tuple[str, ...], kinds: tuple[str, ...], qa_ok: bool,
-          data_root: Path | None, data_format: str | None, split: str, seed: int, init_checkpoint: Path | None,
-          wait: bool, as_json: bool) -> None:
+          data_root: Path | None, data_format: str | None, split: str, seed: int, init_checkpoint: str | None,
+          init_stereo: str | None, wait: bool, as_json: bool) -> None:
     """Train the fusion model on accepted samples (or a dataset folder) as a job on the train queue."""
     rt = state.runtime
     if data_root is not None and data_format is None:
         raise click.ClickException("--data needs --format (native, authors, sceneflow, …)")
     body = {"preset": preset, "steps": steps, "batch": batch, "lr": lr, "crop": crop, "iters": iters,
             "nproc": nproc, "devices": devices, "split": split, "seed": seed, "video_ids": list(video_ids),
-            "illusion_types": list(illusion_types), "kinds": list(kinds), "qa_ok": qa_ok}
-    shell = run_control.ShellOptions(data_dir=data_root, data_format=data_format, init_path=init_checkpoint,
+            "illusion_types": list(illusion_types), "kinds": list(kinds), "qa_ok": qa_ok, "init_stereo": init_stereo}
+    # A name goes through the schema as the web's does; a file's path only the command line may give.
+    named = init_checkpoint is not None and registry.is_name(init_checkpoint)
+    body["init"] = init_checkpoint if named else None
+    init_path = Path(init_checkpoint) if init_checkpoint is not None and not named else None
+    if init_path is not None and not init_path.is_file():
+        raise click.BadParameter(f"{init_checkpoint} is no file (nor RUN:NAME or imported:NAME)", param_hint="--init")
+    shell = run_control.ShellOptions(data_dir=data_root, data_format=data_format, init_path=init_path,
                                      nnodes=nnodes, rdzv_endpoint=rdzv_endpoint)
     with service_errors():
         request = validate(RunLaunch, {k: v for k, v in body.items() if v is not None}, state.settings)

@@ -20,7 +20,7 @@ from dataset.services.errors import Conflict, InvalidInput, NotFound
 from model import launcher, registry
 from model.fit import check_fit, train_device
 from model.jobs import resolve_config
-from model.launch import FieldError, RunLaunch, backbone_dirs
+from model.launch import FieldError, RunLaunch, backbone_dirs, checkpoint_text
 from model.presets import Config
 from model.train.spec import with_backbones
 
@@ -61,16 +61,19 @@ def launch_request(rt: Runtime, session: Session, request: RunLaunch, user: User
         nproc=request.nproc, devices=request.devices, init_checkpoint=shell_init[0], init_label=shell_init[1],
         nnodes=shell.nnodes, rdzv_endpoint=shell.rdzv_endpoint, split=training.parse_split(request.split),
         seed=request.seed)
-    init = _named(rt, session, request.init.run, request.init.checkpoint, field="init") if request.init else None
+    init = _start_from(rt, session, checkpoint_text(request.init), field="init") if request.init else None
+    if request.init_stereo is not None:
+        stereo = _start_from(rt, session, request.init_stereo, field="init_stereo")
+        settings_launch = replace(settings_launch, init_stereo=str(stereo.path), init_stereo_label=stereo.name)
     return launch(rt, session, preset=request.preset, overrides=request.overrides(), selection=selection,
                   launch=settings_launch, user=user, init=init)
 
 
 def launch(rt: Runtime, session: Session, *, preset: str, overrides: dict[str, Any],
            selection: training.DataSelection, launch: training.Launch, user: User | None,
-           init: registry.CheckpointFile | None = None) -> TrainingRun:
+           init: registry.CheckpointFile | registry.ResolvedCheckpoint | None = None) -> TrainingRun:
     """Create the run (its dataset version pinned, checked to fit the data and the machine,
-    ``run.json`` written) and queue its job. ``init``, a run's checkpoint to start from, is pinned
+    ``run.json`` written) and queue its job. ``init``, a checkpoint to start from, is pinned (a run's)
     only once the launch has passed every check."""
     config = resolve_config(preset, {**overrides, "train.seed": launch.seed})
     # The run's config names no backbone directory (answers show it); this machine's settings name
@@ -80,7 +83,9 @@ def launch(rt: Runtime, session: Session, *, preset: str, overrides: dict[str, A
     version = training.pin_selection(session, rt.media, selection)
     check_fit(resolved, nproc=launch.nproc, device=train_device(launch.devices, rt.settings),
               memory_gb=rt.settings.train_memory_gb, smallest_image=training.smallest_image(session, version, selection))
-    if init is not None:
+    if isinstance(init, registry.ResolvedCheckpoint):  # an imported checkpoint: no run rotates it
+        launch = replace(launch, init_checkpoint=str(init.path), init_label=init.name)
+    elif init is not None:
         try:
             pinned = registry.pin(init)
         except ValueError as exc:
@@ -150,13 +155,18 @@ def promote(rt: Runtime, run_id: int, which: str, user: User | None, *, path: Pa
     return doc
 
 
-def _named(rt: Runtime, session: Session, run_id: int, which: str, *, field: str) -> registry.CheckpointFile:
-    """A run's checkpoint named in a launch body; a wrong run or name is that field's error."""
+def _start_from(rt: Runtime, session: Session, name: str, *, field: str,
+                ) -> registry.CheckpointFile | registry.ResolvedCheckpoint:
+    """The checkpoint a launch body names (:func:`model.registry.resolve`'s names): a run's as its
+    file (pinned once the launch passes), an imported one as resolved; a wrong name is that field's error."""
     try:
-        run = training.get_run(session, run_id)
-    except NotFound as exc:
+        found = registry.resolve(rt.settings, name)
+        if found.run is None:
+            return found
+        run = training.get_run(session, found.run)
+    except (NotFound, InvalidInput) as exc:
         raise FieldError(field, str(exc)) from None
-    return _checkpoint_of(rt, run, which, field=field)
+    return _checkpoint_of(rt, run, name.split(":", 1)[1], field=field)
 
 
 def _checkpoint_of(rt: Runtime, run: TrainingRun, which: str, *, field: str) -> registry.CheckpointFile:

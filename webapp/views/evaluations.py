@@ -47,7 +47,8 @@ def index() -> ResponseReturnValue:
     return render_template("evaluations.html", formats=READER_FORMATS, methods=METHODS, default_methods=DEFAULT_METHODS,
                            resolutions=list(RESOLUTIONS), align_rules=ALIGN_RULES, runs=runs,
                            current=registry.current_model(settings), roots=sorted(settings.dataset_roots),
-                           checkpoints=registry.named_checkpoints(g.db, settings.runs_dir))
+                           checkpoints=registry.named_checkpoints(g.db, settings.runs_dir),
+                           imported=[f"{registry.IMPORTED}:{n}" for n in registry.imported_names(settings.home)])
 
 
 @bp.get("/evaluations/<int:evaluation_id>")

@@ -18,7 +18,7 @@ from dataset.readers import READER_FORMATS
 from dataset.services import run_logs, training
 from model import registry
 from model.fit import suggest_crop
-from model.presets import PRESETS, load_preset
+from model.presets import ALL_PRESETS, load_preset
 from webapp.api.blueprint import id_list_arg, int_arg
 from webapp.auth import requires
 from webapp.redact import app_redactor
@@ -39,6 +39,8 @@ def runs() -> ResponseReturnValue:
                            roots=sorted(settings.dataset_roots), max_nproc=settings.train_max_nproc,
                            gpu=settings.train_devices == "cuda",
                            checkpoints=registry.named_checkpoints(g.db, settings.runs_dir),
+                           imported=[f"{registry.IMPORTED}:{n}" for n in registry.imported_names(settings.home)],
+                           preset_names=ALL_PRESETS,
                            suggested_crop=suggest_crop(load_preset("lite"), training.smallest_accepted_image(g.db)),
                            presets=_preset_values())
 
@@ -46,7 +48,7 @@ def runs() -> ResponseReturnValue:
 def _preset_values() -> dict[str, dict[str, Any]]:
     """What each preset trains with when a launch leaves a field empty: the form's placeholders."""
     values = {}
-    for name in PRESETS:
+    for name in ALL_PRESETS:
         train = load_preset(name).train
         values[name] = {"steps": train.steps, "batch": train.batch_size, "lr": train.lr,
                         "crop": "x".join(map(str, train.crop)), "iters": train.train_iters}
