@@ -87,6 +87,7 @@ def test_a_crop_too_large_for_the_data_is_refused_under_the_crop_field(browser, 
     page.context.close()
 
 
+@pytest.mark.timeout(900)  # the run's own waits allow 10 minutes on a loaded machine
 def test_admin_launches_a_run_and_sees_its_chart_grow(browser, server: str, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     page = browser.new_page()
     login(page, server, "admin", PASSWORD)
