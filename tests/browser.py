@@ -84,12 +84,15 @@ def running_demo(home: Path, videos: int = 1) -> Iterator[str]:
 
 
 @contextmanager
-def serving(home: Path, timeout_s: float = 60) -> Iterator[str]:
-    """`illusion-studio serve` of the workspace ``home`` in a subprocess; yields its URL once it answers."""
+def serving(home: Path, timeout_s: float = 60, *, train_worker: bool = False) -> Iterator[str]:
+    """`illusion-studio serve` of the workspace ``home`` in a subprocess (and a `worker --queue train`
+    beside it when ``train_worker``); yields its URL once it answers."""
     port = free_port()
     env = {k: v for k, v in os.environ.items() if not k.startswith("ILLUSION_STUDIO_")}
-    proc = subprocess.Popen([sys.executable, "-m", "webapp.cli", "--data-dir", str(home), "serve", "--port", str(port)],
-                            cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    cli = [sys.executable, "-m", "webapp.cli", "--data-dir", str(home)]
+    commands = [[*cli, "serve", "--port", str(port)], *([[*cli, "worker", "--queue", "train"]] if train_worker else [])]
+    procs = [subprocess.Popen(command, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+             for command in commands]
     url = f"http://127.0.0.1:{port}"
     try:
         deadline = time.monotonic() + timeout_s
@@ -98,11 +101,12 @@ def serving(home: Path, timeout_s: float = 60) -> Iterator[str]:
                 with urllib.request.urlopen(f"{url}/healthz", timeout=2):
                     break
             except OSError:
-                assert proc.poll() is None and time.monotonic() < deadline, "server did not come up"
+                assert procs[0].poll() is None and time.monotonic() < deadline, "server did not come up"
                 time.sleep(0.3)
         yield url
     finally:
-        stop(proc)
+        for proc in procs:
+            stop(proc)
 
 
 def login(page, url: str, name: str, password: str) -> None:  # type: ignore[no-untyped-def]

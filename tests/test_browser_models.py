@@ -3,11 +3,6 @@ an annotator cannot launch."""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
-import time
-import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -16,7 +11,7 @@ import pytest
 from dataset.db import migrate, transaction
 from dataset.models import Role
 from dataset.services import users as user_service
-from tests.browser import ROOT, free_port, login
+from tests.browser import login, serving
 from tests.conftest import PASSWORD, make_settings
 from tests.runs_data import add_accepted_samples
 from webapp.runtime import Runtime
@@ -35,32 +30,8 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
             user_service.create_user(s, role.value, role, PASSWORD)
         add_accepted_samples(s, rt.media, videos=3)
     rt.close()
-    port = free_port()
-    env = {k: v for k, v in os.environ.items() if not k.startswith("ILLUSION_STUDIO_")}
-    cli = [sys.executable, "-m", "webapp.cli", "--data-dir", str(settings.home)]
-    procs = [subprocess.Popen([*cli, "serve", "--port", str(port)], cwd=ROOT, env=env,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL),
-             subprocess.Popen([*cli, "worker", "--queue", "train"], cwd=ROOT, env=env,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
-    url = f"http://127.0.0.1:{port}"
-    try:
-        deadline = time.monotonic() + 60
-        while True:
-            try:
-                with urllib.request.urlopen(f"{url}/healthz", timeout=2):
-                    break
-            except OSError:
-                assert time.monotonic() < deadline, "server did not come up"
-                time.sleep(0.3)
+    with serving(settings.home, train_worker=True) as url:
         yield url
-    finally:
-        for proc in procs:
-            proc.terminate()
-        for proc in procs:
-            try:
-                proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                proc.kill()
 
 
 def test_a_crop_too_large_for_the_data_is_refused_under_the_crop_field(browser, server: str) -> None:  # type: ignore[no-untyped-def]

@@ -3,11 +3,6 @@ imported RAFT-Stereo checkpoint, and the run page says which tensors came from t
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
-import time
-import urllib.request
 from collections.abc import Iterator
 
 import pytest
@@ -18,7 +13,7 @@ from dataset.services import users as user_service
 from model import registry
 from model.checkpoint import save_checkpoint
 from model.raft_import import convert, strip_module
-from tests.browser import ROOT, free_port, login
+from tests.browser import login, serving
 from tests.conftest import PASSWORD, make_settings
 from tests.raft_golden import fixture_state, load_fixture
 from tests.runs_data import add_accepted_samples
@@ -40,32 +35,8 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     rt.close()
     conversion = convert(strip_module(fixture_state(load_fixture("default"))))
     save_checkpoint(registry.imported_path(settings.home, "rs"), conversion.network, conversion.config, step=0)
-    port = free_port()
-    env = {k: v for k, v in os.environ.items() if not k.startswith("ILLUSION_STUDIO_")}
-    cli = [sys.executable, "-m", "webapp.cli", "--data-dir", str(settings.home)]
-    procs = [subprocess.Popen([*cli, "serve", "--port", str(port)], cwd=ROOT, env=env,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL),
-             subprocess.Popen([*cli, "worker", "--queue", "train"], cwd=ROOT, env=env,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
-    url = f"http://127.0.0.1:{port}"
-    try:
-        deadline = time.monotonic() + 60
-        while True:
-            try:
-                with urllib.request.urlopen(f"{url}/healthz", timeout=2):
-                    break
-            except OSError:
-                assert time.monotonic() < deadline, "server did not come up"
-                time.sleep(0.3)
+    with serving(settings.home, train_worker=True) as url:
         yield url
-    finally:
-        for proc in procs:
-            proc.terminate()
-        for proc in procs:
-            try:
-                proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                proc.kill()
 
 
 def test_a_run_started_from_an_imported_stereo_checkpoint_says_what_loaded(browser, server: str) -> None:  # type: ignore[no-untyped-def]

@@ -9,39 +9,18 @@ import os
 import shutil
 from pathlib import Path
 
-import pytest
-
 from dataset.db import transaction
 from dataset.models import Evaluation, Job
 from dataset.services import evaluations, training
 from dataset.services import jobs as job_service
-from dataset.settings import Settings
 from tests.conftest import make_settings, migrate
 from tests.runs_data import add_accepted_samples
 from tests.test_run_logs import write_launch
 from tests.test_runs import SHORT, _queued_run, write_checkpoint
+from tests.test_trust_boundary import bearer, samples, settings  # noqa: F401  (fixtures)
 from webapp.jobs.handlers import HANDLERS
 
 LONG = "a" * 300  # over the 255 bytes a file name may have
-
-
-@pytest.fixture
-def settings(tmp_path: Path) -> Settings:
-    """A workspace with one registered dataset root, ``data`` → ``<tmp>/roots/data``."""
-    (tmp_path / "roots" / "data" / "kitti").mkdir(parents=True)
-    s = make_settings(tmp_path / "ws", dataset_roots={"data": str(tmp_path / "roots" / "data")})
-    migrate(s.database_url)
-    return s
-
-
-@pytest.fixture
-def samples(runtime) -> list[int]:  # type: ignore[no-untyped-def]
-    with transaction(runtime.sessions) as s:
-        return add_accepted_samples(s, runtime.media, videos=3)
-
-
-def bearer(tokens: dict[str, str], role: str) -> dict[str, str]:
-    return {"Authorization": f"Bearer {tokens[role]}"}
 
 
 def outside_tree(tmp_path: Path) -> Path:
