@@ -1,9 +1,11 @@
 // Uploads videos one by one with a byte progress bar (XHR: fetch has no upload progress),
 // then follows each ingest job's progress until it finishes, saying when a video copies one
-// already in the workspace.
+// already in the workspace. What tells two files of one name apart: under the name, the file's
+// size and upload time; once ingested, the video it became beside its frame count.
 import { api, el, poll } from "./api.js";
 import { keyboardHelp } from "./help.js";
 import { summary } from "./job_summary.js";
+import { plural } from "./labels.js";
 import { failure, HEADERS } from "./request.js";
 import { sessionEnded } from "./session_ended.js";
 
@@ -28,6 +30,19 @@ function upload(file, fields, onProgress) {
   });
 }
 
+// "12.3 MiB", as the server words sizes (webapp.bodies.size_text).
+function sizeText(bytes) {
+  if (bytes < 1024) return plural(bytes, "byte");
+  const [value, unit] = bytes < 2 ** 20 ? [bytes / 1024, "KiB"] : [bytes / 2 ** 20, "MiB"];
+  return `${Number(value.toPrecision(3))} ${unit}`;
+}
+
+// "12.3 MiB · 14:05:31": the file's size and when its upload began, in the browser's time.
+function fileFacts(file, started) {
+  const time = started.toLocaleTimeString([], { hour: "2-digit", minute: "2-digit", second: "2-digit" });
+  return `${sizeText(file.size)} · ${time}`;
+}
+
 function follow(job, row) {
   const bar = row.querySelector("progress");
   const label = row.querySelector(".status");
@@ -45,6 +60,11 @@ function follow(job, row) {
     }
     if (done) {
       row.classList.toggle("failed", current.state !== "succeeded");
+      const videoId = current.result?.video_id;
+      // (a skipped upload's summary names the video it already is)
+      if (current.state === "succeeded" && videoId != null && !current.result.skipped) {
+        label.append(" · ", el("a", { href: `/review?video_id=${videoId}` }, `video #${videoId}`));
+      }
       stop();
     }
   }, 1000);
@@ -72,8 +92,10 @@ async function uploadAll() {
   const fields = [...new FormData(form)].filter(([key]) => !["file", "prefilter"].includes(key));
   fields.push(["prefilter", form.elements.prefilter.checked ? "1" : "0"]);
   for (const file of files) {
+    // The facts come last: the row's grid puts them on a line of their own, under the name.
     const row = el("li", {}, el("span", { className: "name", title: file.name }, file.name), el("progress", { max: 1, value: 0 }),
-      el("span", { className: "status" }, "uploading…"));
+      el("span", { className: "status" }, "uploading…"),
+      el("span", { className: "file-facts muted" }, fileFacts(file, new Date())));
     list.prepend(row);
     if (file.size > Number(form.dataset.maxBytes)) {
       row.querySelector(".status").textContent = "too large for this server's upload limit";
@@ -101,4 +123,5 @@ keyboardHelp([
   ["Run the VLM prefilter", "ask the prefilter about every new frame, so curators review only what it keeps"],
   ["A copy", "a video whose frames match one already here (re-encoded, resized or renamed) joins that video's "
              + "scene group: training and export splits keep the two on one side"],
-], { note: "Each row below links to its job, whose page shows the full log." });
+], { note: "Each row below links to its job, whose page shows the full log, and once ingested to the video "
+           + "it became. Under each file's name: its size and when its upload began." });

@@ -11,6 +11,7 @@ import click
 
 from dataset.db import migrate
 from dataset.settings import Settings, SettingsError, load_settings
+from dataset.wording import plural
 from webapp.cli.state import CliState, pass_state
 from webapp.runtime import Runtime
 
@@ -96,6 +97,10 @@ def synth(out_dir: Path, videos: int, seed: int, n_frames: int, size: str) -> No
             bar.update(1)
     for path in paths:
         click.echo(str(path))
+    # stdout lists the folders, one a line, for scripts; the summary is for the person
+    seeds = f"seed {seed}" if videos == 1 else f"seeds {seed}–{seed + videos - 1}"
+    click.echo(f"made {plural(videos, 'video')}, {plural(videos * n_frames, 'frame')}, {width}×{height}, {seeds} "
+               f"in {out_dir}", err=True)
 
 
 def _parse_size(size: str) -> tuple[int, int]:
