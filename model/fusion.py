@@ -6,7 +6,8 @@ convex upsampling → the final disparity.
 
 ``fusion_rule = "released"`` is the authors' released rule instead: unconfident (a, b) become
 the global confident mean and D = c·D_s + (1−c)·(a·D_m + b), upsampled with the stereo
-branch's convex mask. Everything here is at the working resolution, disparities in its pixels.
+branch's convex mask. ``fusion_gate`` replaces the blend by a hard gate with the blend's gradient
+(:func:`blend`). Everything here is at the working resolution, disparities in its pixels.
 """
 
 from __future__ import annotations
@@ -64,13 +65,25 @@ def refine_affine(params: Tensor, confidence: Tensor, *, kernel: int | None) -> 
     return torch.where(confident, params, pooled)
 
 
+def blend(stereo: Tensor, aligned: Tensor, confidence: Tensor, *, gate: bool) -> Tensor:
+    """c·D_s + (1−c)·D̃_m (B×1×h×w each); with ``gate`` the forward value is D_s where c ≥ 0.5 and D̃_m
+    elsewhere while the gradient is the soft blend's (straight-through), so training still tells the
+    confidence which way to move, but a pixel stereo gets right is never pulled towards a mono that errs
+    on the same side of the truth."""
+    soft = confidence * stereo + (1 - confidence) * aligned
+    if not gate:
+        return soft
+    hard = torch.where(confidence >= 0.5, stereo, aligned)
+    return soft + (hard - soft).detach()
+
+
 class GlobalFusion(nn.Module):
     """Fuses D_m (normalised, B×1×h×w) and D_s (B×1×h×w pixels) under I_c (B×1×h×w)."""
 
     def __init__(self, config: ModelConfig, hidden_channels: int) -> None:
         super().__init__()
         dim = config.fusion_dim
-        self.rule, self.kernel = config.fusion_rule, config.fusion_pool_kernel
+        self.rule, self.kernel, self.gate = config.fusion_rule, config.fusion_pool_kernel, config.fusion_gate
         self.factor, self.border = 2**config.n_downsample, config.upsample_border
         # Convolutions on [D_m, D_s] (and the least-squares fit) predict s_m, t_m as corrections to the
         # per-image least-squares solution, in units of the image's disparity spread: ≈ 0 at start.
@@ -96,11 +109,11 @@ class GlobalFusion(nn.Module):
         params = refine_affine(params, confidence, kernel=self.kernel if self.rule == "paper" else None)
         scale, shift = params[:, :1], params[:, 1:]
         aligned = scale * mono + shift
-        blend = confidence * stereo + (1 - confidence) * aligned
+        blended = blend(stereo, aligned, confidence, gate=self.gate)
         if self.rule == "released":
-            return FusionResult(convex_upsample(blend, stereo_mask, self.factor, self.border), scale, shift)
+            return FusionResult(convex_upsample(blended, stereo_mask, self.factor, self.border), scale, shift)
         features = self.fuse(torch.cat([aligned / spread, stereo / spread, confidence, hidden], dim=1))
-        low = blend + self.residual(features) * spread
+        low = blended + self.residual(features) * spread
         return FusionResult(convex_upsample(low, self.mask(features), self.factor, self.border), scale, shift)
 
 

@@ -7,6 +7,10 @@ authors' code does, γ^(15/(T−1)) for T > 1 (γ itself for T = 1). L_c is the 
 target, ``train.confidence_target = "threshold"``). ``"closer"`` (``lite``) trusts the stereo also
 where it is no farther from D_G than the aligned mono D̃_m: the threshold alone sends every pixel
 the stereo misses by 1.25 px to the mono, which a coarse relative estimate misses by more.
+``train.confidence_loss = "ce"`` uses the plain cross entropy L_b times ``ce_weight`` instead of the
+focal term: the final L1 pulls the logits through the blend by about |D̃_m − D_s|·c(1−c) per pixel —
+5–10× the focal term's push outside mirrors and ~1000× inside them — and at c ≈ 0.84 the focal
+factor leaves ~1/55 of L_b's gradient.
 
 Only valid pixels with ground truth below ``max_disparity`` count. Every term is a SUM over
 this rank's pixels divided by ``valid_total``, the valid-pixel count summed over all ranks (the
@@ -58,6 +62,14 @@ def focal_terms(logits: Tensor, target: Tensor, alpha: float, gamma: float) -> T
     return alpha * (1 - torch.exp(-bce)) ** gamma * bce
 
 
+def confidence_terms(logits: Tensor, target: Tensor, cfg: TrainConfig) -> Tensor:
+    """Per pixel confidence loss, weighted: the focal term (``focal_weight``) or, with
+    ``confidence_loss = "ce"``, the binary cross entropy times ``ce_weight``."""
+    if cfg.confidence_loss == "ce":
+        return cfg.ce_weight * F.binary_cross_entropy_with_logits(logits, target, reduction="none")
+    return cfg.focal_weight * focal_terms(logits, target, cfg.focal_alpha, cfg.focal_gamma)
+
+
 def fusion_loss(out: FusionOutput, gt: Tensor, valid: Tensor, cfg: TrainConfig, *,
                 valid_total: Tensor | None = None) -> tuple[Tensor, dict[str, float]]:
     """(scalar loss, parts) for ``gt`` B×1×H×W pixels and ``valid`` bool B×1×H×W. Parts:
@@ -89,8 +101,8 @@ def fusion_loss(out: FusionOutput, gt: Tensor, valid: Tensor, cfg: TrainConfig, 
         mono_error = (gt - out.mono_aligned.detach()).abs() if cfg.confidence_target == "closer" else None
         target, valid_low = confidence_target(error, mask, size, mono_error)
         area = (size[0] * size[1]) / (gt.shape[2] * gt.shape[3])
-        terms = focal_terms(out.confidence_logits, target, cfg.focal_alpha, cfg.focal_gamma)
-        confidence = cfg.focal_weight * (terms * valid_low).sum() / (total * area)
+        terms = confidence_terms(out.confidence_logits, target, cfg)
+        confidence = (terms * valid_low).sum() / (total * area)
     loss = stereo + mono + final + confidence
     with torch.no_grad():
         epe = ((out.disparity - gt).abs() * maskf).sum() / count.clamp_min(1)

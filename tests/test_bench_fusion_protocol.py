@@ -16,6 +16,7 @@ torch = pytest.importorskip("torch")
 
 from dataset.services import training  # noqa: E402
 from dataset.synthetic import render_video  # noqa: E402
+from dataset.synthetic.corruptions import warped_mono  # noqa: E402
 from model.align import align  # noqa: E402
 from model.checkpoint import load_network, save_checkpoint  # noqa: E402
 from model.jobs import resolve_config  # noqa: E402
@@ -47,17 +48,14 @@ def test_held_out_pairs_are_bit_identical_whatever_the_training_workspace_holds(
         scored.append(fusion.pairs_digest(pairs))
         return score(pairs, methods)
 
-    def trained(_rt: Any, k: int, _pairs: Any, _networks: Any, _launched: Any) -> dict[str, Any]:
-        figures = {"fusion": {r: {"epe": 1.0 + k, "bad2": 10.0} for r in fusion.REGIONS}}
-        return {"methods": figures, "runs": {"fusion": k + 1}, "train_s": {"fusion": 1.0}, "score_s": {"fusion": 1.0}}
-
     one_frame = fusion.held_out_samples
-    monkeypatch.setattr(fusion, "held_out_samples", lambda seeds: one_frame(seeds[:2], frames=1))
+    monkeypatch.setattr(fusion, "held_out_samples", lambda seeds, mono: one_frame(seeds[:2], frames=1, mono=mono))
     monkeypatch.setattr(fusion, "training_seeds", lambda _rt, count: list(range(count)))
     monkeypatch.setattr(fusion, "launch_run", lambda *_a, **_k: 1)
+    monkeypatch.setattr(fusion, "finished_run", lambda *_a: None)  # both workspaces train their own
     monkeypatch.setattr(fusion, "run_jobs", lambda _rt, workers: None)
     monkeypatch.setattr(fusion, "_score", recording)
-    monkeypatch.setattr(fusion, "_seed_scores", trained)
+    monkeypatch.setattr(fusion, "_seed_scores", _trained)
     reports = []
     for train_range, fooling in (([3.0, 44.0], 2.1), ([10.0, 90.0], 30.0)):
         conditions = {"mirror_fooling_px": {"frames": 1, "min": fooling, "median": fooling, "max": fooling}}
@@ -71,6 +69,76 @@ def test_held_out_pairs_are_bit_identical_whatever_the_training_workspace_holds(
     assert reports[0]["conditions"]["held_out"] == reports[1]["conditions"]["held_out"]
     assert reports[0]["train_disparity_px"] != reports[1]["train_disparity_px"]
     assert reports[0]["paired"]["against"]["sgbm"]["all"]["epe_spread"] == pytest.approx(0.5)
+
+
+def _trained(_rt: Any, k: int, _pairs: Any, _networks: Any, launched: Any) -> dict[str, Any]:
+    """Benchmark seed ``k``'s fusion network scored without a network: its figures depend on ``k`` alone."""
+    figures = {"fusion": {r: {"epe": 1.0 + k, "bad2": 10.0} for r in fusion.REGIONS}}
+    return {"methods": figures, "runs": {"fusion": launched[k, "fusion"]}, "train_s": {"fusion": 1.0},
+            "score_s": {"fusion": 1.0}}
+
+
+def test_warp_pairs_are_the_held_out_render_with_the_warp_mono() -> None:
+    """The same render as the realistic mono's pairs (images, truth, regions), the monocular input only
+    replaced by the frame's warped_mono of its mono-fooled disparity."""
+    seed = fusion.CORRUPTION_SEEDS[0]
+    (realistic,), (warp,) = (fusion.held_out_samples((seed,), frames=1, mono=mono) for mono in fusion.MONO_FAMILIES)
+    frame = render_video(seed, 1, *fusion.SIZE, baseline_m=fusion.HELD_OUT_BASELINE_M).frames[0]
+    assert warp.name == realistic.name and warp.meta == realistic.meta and set(warp.regions) == set(realistic.regions)
+    assert all(np.array_equal(getattr(warp, k), getattr(realistic, k)) for k in ("left", "right", "disparity"))
+    assert all(np.array_equal(warp.regions[r], realistic.regions[r]) for r in warp.regions)
+    assert np.array_equal(warp.mono, warped_mono(frame.mono_ideal, seed, 0)) and not np.allclose(warp.mono, realistic.mono)
+    assert fusion.held_out_seeds(None, "warp") == fusion.CORRUPTION_SEEDS
+    assert fusion.held_out_seeds(None, "realistic") == fusion.TEST_SEEDS == fusion.held_out_seeds("test", "realistic")
+    assert fusion.held_out_seeds("val", "realistic") == fusion.VAL_SEEDS
+    for split, mono, message in (("val", "warp", "no split"), (None, "ideal", "unknown mono"),
+                                 ("train", "realistic", "unknown split")):
+        with pytest.raises(ValueError, match=message):
+            fusion.held_out_seeds(split, mono)
+
+
+def test_warp_seeds_are_held_out_from_training_validation_test_and_pretraining() -> None:
+    warp = set(fusion.CORRUPTION_SEEDS)
+    others = {*range(fusion.GENERATED_VIDEOS), *fusion.RENDERED_SEEDS, *fusion.TEST_SEEDS, *fusion.VAL_SEEDS}
+    assert len(warp) == 4 and not warp & others
+    assert warp <= pretrain.benchmark_seeds() and not warp & set(pretrain.pretrain_seeds(50_000))
+
+
+def test_scoring_the_warp_pairs_after_val_trains_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """`bench fusion --split val`, then `--mono warp` on the same work dir: the second run finds every
+    network in the ledger (a network's key holds no held-out set) and scores the warp pairs, recorded as
+    such with their own hash."""
+    launched: list[int] = []
+
+    def launch(_rt: Any, seed: int, _overrides: Any, *, init: Path | None = None) -> int:
+        launched.append(seed)
+        return len(launched)
+
+    def workspace(home: Path) -> tuple[_Workspace, bool, dict[str, Any]]:
+        home.mkdir(parents=True, exist_ok=True)
+        return _Workspace(home), True, {"captures": {}}
+
+    one_frame = fusion.held_out_samples
+    monkeypatch.setattr(fusion, "held_out_samples", lambda seeds, mono: one_frame(seeds[:1], frames=1, mono=mono))
+    monkeypatch.setattr(fusion, "prepared_workspace", workspace)
+    monkeypatch.setattr(fusion, "training_disparity_range", lambda _rt: [3.0, 44.0])
+    monkeypatch.setattr(fusion, "training_seeds", lambda _rt, count: list(range(count)))
+    monkeypatch.setattr(fusion, "launch_run", launch)
+    # the ledger's runs all succeeded (no database here)
+    monkeypatch.setattr(fusion, "finished_run", lambda _rt, ledger, key: json.loads(ledger.read_text()).get(key)
+                        if ledger.is_file() else None)
+    monkeypatch.setattr(fusion, "run_jobs", lambda _rt, workers: None)
+    monkeypatch.setattr(fusion, "_seed_scores", _trained)
+    val, warp = (fusion.run_fusion_bench(tmp_path, seeds=2, steps=5, **kw) for kw in ({"split": "val"}, {"mono": "warp"}))
+    assert launched == [0, 1] and val["reused_runs"] == [] and warp["reused_runs"] == [1, 2]
+    assert [r["runs"] for r in warp["per_seed"]] == [r["runs"] for r in val["per_seed"]]
+    pairs = one_frame(fusion.CORRUPTION_SEEDS[:1], frames=1, mono="warp")
+    assert {k: warp["pairs"][k] for k in ("split", "mono", "seeds", "samples", "baseline_m", "sha256")} == {
+        "split": None, "mono": "warp", "seeds": list(fusion.CORRUPTION_SEEDS), "samples": 1, "baseline_m": 0.63,
+        "sha256": fusion.pairs_digest(pairs)}
+    assert val["pairs"]["split"] == "val" and val["pairs"]["mono"] == "realistic"
+    epe = fusion.condition_values(pairs)["aligned_mono_epe_px"]
+    assert warp["conditions"]["held_out"]["aligned_mono_epe_px"]["median"] == round(epe[0], 3)
 
 
 def _version(videos: int) -> dict[str, Any]:
@@ -252,8 +320,8 @@ def test_cli_fusion_prints_the_conditions_the_figures_and_the_paired_record(tmp_
               "aligned_mono_epe_px": {"frames": 36, "min": 1.0, "median": 1.8, "max": 2.6}}
     per_seed = [{"fusion": {"mirror": {"epe": 2.0 + k, "bad2": 50.0}}, "stereo_only": {"mirror": {"epe": 2.5, "bad2": 40.0}}}
                 for k in range(2)]
-    results = {"pairs": {"split": "test", "seeds": [100, 103], "samples": 24, "baseline_m": 0.63, "disparity_px": [18.6, 51.0],
-                         "sha256": "c" * 64},
+    results = {"pairs": {"split": "test", "mono": "realistic", "seeds": [100, 103], "samples": 24, "baseline_m": 0.63,
+                         "disparity_px": [18.6, 51.0], "sha256": "c" * 64},
                "train_disparity_px": [3.0, 70.0],
                "conditions": {"training": {"captures": ranges, "generated": {**ranges, "mirror_fooling_px": {"frames": 0}}},
                               "held_out": ranges},
@@ -270,3 +338,34 @@ def test_cli_fusion_prints_the_conditions_the_figures_and_the_paired_record(tmp_
     assert any(line.split()[:1] == ["stereo_only"] and "+0.00 ± 0.50 [1]" in line for line in lines)  # EPE: -0.5, +0.5
     assert any(line.split()[:1] == ["stereo_only"] and "+10.00 ± 0.00 [0]" in line for line in lines)  # bad-2
     assert "from scratch" in out.output
+    assert lines[0].startswith("held-out pairs: test, mono realistic, seeds 100-103")
+    results["pairs"] = {**results["pairs"], "split": None, "mono": "warp", "seeds": [300, 303]}
+    out = CliRunner().invoke(main, ["bench", "fusion", "--mono", "warp", "--work-dir", str(tmp_path)])
+    assert out.exit_code == 0, out.output
+    lines = out.output.splitlines()
+    assert lines[0].startswith("held-out pairs: warp, mono warp, seeds 300-303")
+    assert any(line.split()[:2] == ["warp", "pairs"] for line in lines)
+
+
+def test_cli_fusion_passes_the_mono_family(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """--mono reaches the training benchmark and --mono-only alike; --split with --mono warp is refused;
+    --help names the warp pairs' seeds."""
+    calls: list[tuple[str, dict[str, Any]]] = []
+    monkeypatch.setattr(fusion, "run_fusion_bench", lambda work_dir, **kw: calls.append(("fusion", kw)) or {"ok": 1})
+    monkeypatch.setattr(fusion, "run_mono_bench", lambda **kw: calls.append(("mono", kw)) or {"ok": 1})
+    work = ["--work-dir", str(tmp_path), "--json"]
+    for flags, expected in ((["--mono", "warp"], ("fusion", None, "warp")), ([], ("fusion", None, "realistic")),
+                            (["--split", "val"], ("fusion", "val", "realistic")),
+                            (["--mono-only", "--mono", "warp"], ("mono", None, "warp")),
+                            (["--mono-only", "--split", "val"], ("mono", "val", "realistic"))):
+        calls.clear()
+        out = CliRunner().invoke(main, ["bench", "fusion", *work, *flags])
+        assert out.exit_code == 0, (flags, out.output)
+        (kind, kw), = calls
+        assert (kind, kw["split"], kw["mono"]) == expected, flags
+    for flags in (["--mono", "warp", "--split", "test"], ["--mono-only", "--mono", "warp", "--split", "val"]):
+        out = CliRunner().invoke(main, ["bench", "fusion", *work, *flags])
+        assert out.exit_code == 2 and "--split" in out.output, flags
+    assert CliRunner().invoke(main, ["bench", "fusion", "--mono", "ideal"]).exit_code == 2
+    seeds = fusion.CORRUPTION_SEEDS
+    assert f"seeds {seeds[0]}-{seeds[-1]}" in CliRunner().invoke(main, ["bench", "fusion", "--help"]).output

@@ -12,7 +12,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from model.checkpoint import load_checkpoint, load_network, save_checkpoint  # noqa: E402
-from model.fusion import refine_affine  # noqa: E402
+from model.fusion import blend, refine_affine  # noqa: E402
 from model.losses import confidence_target, focal_terms, fusion_loss, sequence_gamma  # noqa: E402
 from model.network import FusionNetwork, FusionOutput  # noqa: E402
 from model.predictor import Predictor  # noqa: E402
@@ -153,8 +153,64 @@ def test_the_loss_equals_a_hand_computation() -> None:
     assert sequence_gamma(0.9, 1) == 0.9 and math.isclose(sequence_gamma(0.9, 16), 0.9)
 
 
+def test_the_gate_takes_stereo_or_mono_whole_with_the_blends_gradient() -> None:
+    """Stereo 10 px, mono 4 px: the soft blend mixes them, the gate takes one whole by c ≥ 0.5, and the
+    gradients reaching c (straight-through) are the soft blend's, D_s − D̃_m per pixel."""
+    stereo, aligned = torch.full((1, 1, 1, 3), 10.0), torch.full((1, 1, 1, 3), 4.0)
+    soft_c = torch.tensor([[[[0.2, 0.5, 0.9]]]], requires_grad=True)
+    hard_c = soft_c.detach().clone().requires_grad_(True)
+    soft = blend(stereo, aligned, soft_c, gate=False)
+    hard = blend(stereo, aligned, hard_c, gate=True)
+    assert torch.allclose(soft, torch.tensor([[[[5.2, 7.0, 9.4]]]]))
+    assert hard.flatten().tolist() == [4.0, 10.0, 10.0]
+    soft.sum().backward()
+    hard.sum().backward()
+    assert torch.equal(soft_c.grad, hard_c.grad) and torch.allclose(hard_c.grad, torch.full_like(hard_c, 6.0))
+
+
+def test_the_cross_entropy_confidence_loss_is_the_weighted_bce() -> None:
+    """Same batch as the hand computation's below: with confidence_loss "ce" the term is ce_weight·L_b
+    over the valid low-resolution pixel, whose gradient at c ≈ 0.84 is ~55× the focal term's."""
+    cfg = load_preset("lite", {"confidence_loss": "ce", "ce_weight": 3.0}).train
+    gt = torch.tensor([[[[1.0, 2.0, 800.0, 4.0]] * 2]])
+    valid = torch.ones_like(gt, dtype=torch.bool)
+    valid[0, 0, 1, 3] = False
+    logits = torch.tensor([[[[math.log(0.84 / 0.16), -1.0]]]])
+    out = FusionOutput(gt + 0.5, [gt + 1.0], gt + 1.0, gt - 3.0, torch.sigmoid(logits), logits, gt)
+    _, parts = fusion_loss(out, gt, valid, cfg)
+    bce = -math.log(0.84)
+    assert math.isclose(parts["confidence"], 3.0 * bce / (5 * 2 / 8), rel_tol=1e-5)
+    pushes = []
+    for terms in (lambda x: torch.nn.functional.binary_cross_entropy_with_logits(x, torch.ones_like(x)),
+                  lambda x: focal_terms(x, torch.ones_like(x), 0.25, 2.0)):
+        logit = logits[..., :1].clone().requires_grad_(True)
+        terms(logit).sum().backward()
+        pushes.append(float(logit.grad))
+    assert 50 < pushes[0] / pushes[1] < 60
+    with pytest.raises(ValueError, match="train.ce_weight"):
+        load_preset("lite", {"ce_weight": -1})
+
+
+def test_a_deterministic_flow_ignores_the_noise() -> None:
+    config = load_preset("lite", {**SMALL, "flow_noise": False})
+    torch.manual_seed(0)
+    network = FusionNetwork(config.model).eval()
+    left, right, mono, _ = _tensors()
+    with torch.no_grad():
+        first, second = (network(left, right, mono, iters=2, noise=torch.Generator().manual_seed(seed)).confidence
+                         for seed in (1, 2))
+    assert torch.equal(first, second)
+    noisy = FusionNetwork(load_preset("lite", SMALL).model).eval()
+    noisy.load_trainable_state_dict(network.trainable_state_dict())
+    with torch.no_grad():
+        first, second = (noisy(left, right, mono, iters=2, noise=torch.Generator().manual_seed(seed)).confidence
+                         for seed in (1, 2))
+    assert not torch.equal(first, second)
+
+
 @pytest.mark.parametrize("overrides", [{}, {"use_vlm": False}, {"confidence_image_features": False},
-                                       {"fusion_rule": "released"}])
+                                       {"fusion_rule": "released"},
+                                       {"fusion_gate": True, "flow_noise": False, "confidence_loss": "ce"}])
 def test_gradients_reach_every_trainable_parameter(overrides: dict) -> None:
     config = load_preset("lite", {**SMALL, **overrides})
     torch.manual_seed(0)

@@ -18,7 +18,11 @@ The held-out pairs are frozen: rendered pairs of seeds never seen in training, a
 baseline HELD_OUT_BASELINE_M, whatever the training data holds, with their realistic monocular
 disparity as the monocular input; the JSON records their baseline and a hash of their pixels. The
 test pairs (TEST_SEEDS) are scored once; the validation pairs (VAL_SEEDS, ``split="val"``) are what
-the model's decisions are made on. Every method is scored densely over the same valid pixels.
+the model's decisions are made on. A third set, ``mono="warp"``, asks whether fusion learnt to weigh a
+monocular map against stereo or only the realistic estimator's errors: pairs of seeds of its own
+(CORRUPTION_SEEDS), rendered alike, whose monocular input is of another family than the one training
+shows (``dataset.synthetic.corruptions.warped_mono``: a smooth warp of the scene's mono-fooled
+disparity, blur, noise and an unknown affine). Every method is scored densely over the same valid pixels.
 
 The record is paired: the train/val split of the training data is the same for every benchmark
 seed (SPLIT_SEED's), so a seed changes only the training (initialisation, order, augmentation);
@@ -26,8 +30,11 @@ every seed's figures are kept, and fusion's differences against each other metho
 by seed. ``ablations`` trains, per seed, the no-VLM and stereo-only networks beside fusion
 (ABLATIONS). ``run_mono_bench`` scores mono-gt-align alone, without training.
 
-Preparing the data is cached in the work folder; preparing, rendering the held-out pairs, each
-network's training and each scoring are timed apart.
+Preparing the data is cached in the work folder, and so is every network trained (TRAINED): a network
+is trained again only when its config, launch seed, starting trunk or the model package's code differ
+(:func:`network_key`), so scoring the test pairs after deciding on the validation ones trains nothing,
+and a benchmark stopped half way resumes. Preparing, rendering the held-out pairs, each network's
+training and each scoring are timed apart.
 """
 
 from __future__ import annotations
@@ -45,10 +52,12 @@ import numpy as np
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+import model
+from dataset.atomic import atomic_write_bytes
 from dataset.capture.synthetic import import_rendered_video
 from dataset.db import transaction
 from dataset.media import MediaStore
-from dataset.models import Frame, FrameState, Job, JobState, Role, Sample, SampleState, TrainingRun, User, Video
+from dataset.models import Frame, FrameState, Job, JobState, Role, RunState, Sample, SampleState, TrainingRun, User, Video
 from dataset.readers import StereoSample
 from dataset.readers.base import make_regions
 from dataset.readers.version import VersionReader, pin_dataset_version
@@ -61,6 +70,7 @@ from dataset.services.ingest import ingest_params
 from dataset.services.review import review_frame
 from dataset.services.sample_review import review_sample
 from dataset.synthetic import SyntheticVideo, render_video, write_synthetic_dataset
+from dataset.synthetic.corruptions import warped_mono
 from dataset.synthetic.io import FORMAT as SYNTHETIC_FORMAT
 from dataset.synthetic.mono import realistic_mono, sample_mono_model
 from model.evaluate import EvalOptions, evaluate, sample_metrics
@@ -79,7 +89,9 @@ GENERATED_VIDEOS = 6  # seeds 0..5 through the pipeline
 RENDERED_SEEDS = tuple(range(40, 46))  # imported as captures
 TEST_SEEDS = tuple(range(100, 104))  # held out: never in training or validation; scored once, at the end
 VAL_SEEDS = tuple(range(200, 204))  # held out as well, rendered alike: the model's decisions are made on these
-SPLITS: dict[str, tuple[int, ...]] = {"test": TEST_SEEDS, "val": VAL_SEEDS}
+SPLITS: dict[str, tuple[int, ...]] = {"test": TEST_SEEDS, "val": VAL_SEEDS}  # the realistic mono's held-out pairs
+CORRUPTION_SEEDS = tuple(range(300, 304))  # held out as well, rendered alike: the warp mono's pairs, no split
+MONO_FAMILIES = ("realistic", "warp")  # the held-out pairs' monocular input: the training estimator's family, or not
 HELD_OUT_BASELINE_M = 0.63  # frozen: the baseline protocol 1 derived for the test pairs (0.6279 m), now a constant
 # Per capture video, log-uniform: the held-out pairs at 0.63 m span about 19-51 px (1st-99th percentile)
 # and their mirrors fool stereo by 8-17 px; scenes at 0.35-1.0 m span about 10-83 px and 5-29 px.
@@ -90,11 +102,13 @@ REGIONS = ("all", "picture", "mirror", "non_illusion")
 BASELINES = ("mono_gt_align", "sgbm")  # untrained: scored once per benchmark, not per seed
 TRAIN_OVERRIDES: dict[str, Any] = {"train.batch_size": 2, "train.crop": (160, 288), "train.val_every": 200,
                                    "train.checkpoint_every": 200}
-DEFAULT_STEPS = 1500
+DEFAULT_STEPS = 1500  # from scratch
+FINETUNE_STEPS = 500  # from the pre-trained trunk: the paper fine-tunes briefly on illusions after pre-training
 SPLIT = "train=0.85,val=0.15"
 SPLIT_SEED = 0  # every benchmark seed trains on the train/val split this seed deals
 _SEED_SEARCH = 100_000  # launch seeds tried for one that deals SPLIT_SEED's split
 PREPARED = "prepared.json"  # in a workspace: the recipe it was prepared with and the conditions its data shows
+TRAINED = "trained.json"  # in a workspace: {network_key: run id} of every network launched there
 
 
 @dataclass(frozen=True)
@@ -118,28 +132,44 @@ ABLATIONS = (Network("no_vlm", {"model.use_vlm": False}, {"fusion_no_vlm": "fusi
 
 
 def run_fusion_bench(work_dir: Path, *, seeds: int = 1, steps: int = DEFAULT_STEPS, ablations: bool = False,
-                     split: str = "test", workers: int = 1, pretrained: Path | None = None) -> dict[str, Any]:
+                     split: str | None = None, mono: str = "realistic", workers: int = 1,
+                     pretrained: Path | None = None, overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Prepare (or reuse) the data in ``work_dir``, train per seed the fusion network (and, with
-    ``ablations``, the no-VLM and stereo-only ones) — each fine-tuned from the trunk file ``pretrained``
-    when one is given —, ``workers`` trainings at a time, and score every method on the held-out pairs
-    of ``split`` (SPLITS). Returns per method and region the mean (and spread over seeds) of EPE and
-    bad-2, every seed's figures, fusion's paired differences against every other method, the
-    conditions (mirror fooling, aligned mono error) of training and of the pairs, the disparity ranges,
-    and the timings (seconds; a network's training time is its job's, from start to end)."""
+    ``ablations``, the no-VLM and stereo-only ones) — ``lite`` with ``overrides`` on every network, each
+    fine-tuned from the trunk file ``pretrained`` when one is given, each reused when the workspace has
+    trained it already —, ``workers`` trainings at a time, and score every method on the held-out pairs
+    of ``split`` and ``mono`` (:func:`held_out_seeds`; which pairs are scored changes no network's key).
+    Returns per method and region the mean (and spread over seeds) of EPE and bad-2, every seed's
+    figures, fusion's paired differences against every other method, the conditions (mirror fooling,
+    aligned mono error) of training and of the pairs, the disparity ranges, and the timings (seconds; a
+    network's training time is its job's, from start to end)."""
+    overrides = dict(overrides or {})
     started = time.perf_counter()
     trunk = load_trunk(pretrained) if pretrained is not None else None
     rt, cached, train_conditions = prepared_workspace(work_dir / "workspace")
     prepare_s = time.perf_counter() - started
     train_range = training_disparity_range(rt)
-    pairs, render_s, info = _held_out(split)
+    pairs, render_s, info = _held_out(split, mono)
     networks = (FUSION, *ABLATIONS) if ablations else (FUSION,)
     timed = time.perf_counter()
     baselines = _score(pairs, build_methods(list(BASELINES), checkpoint=None, predictions=None, mono_dir=None))
     baselines_s = time.perf_counter() - timed
     train_seeds = training_seeds(rt, seeds)
-    inits, init_report = _inits(rt, trunk, networks, train_seeds, steps)
-    launched = {(k, network.name): launch_run(rt, seed, network_overrides(network, steps), init=inits.get((k, network.name)))
-                for k, seed in enumerate(train_seeds) for network in networks}
+    inits, init_report = _inits(rt, trunk, networks, train_seeds, steps, overrides)
+    ledger, fingerprint = rt.settings.home / TRAINED, model_fingerprint()
+    launched: dict[tuple[int, str], int] = {}
+    reused: list[int] = []
+    for k, seed in enumerate(train_seeds):
+        for network in networks:
+            config = network_overrides(network, steps, overrides)
+            key = network_key(config, seed, trunk, fingerprint)
+            run_id = finished_run(rt, ledger, key)
+            if run_id is None:
+                run_id = launch_run(rt, seed, config, init=inits.get((k, network.name)))
+                record_run(ledger, key, run_id)
+            else:
+                reused.append(run_id)
+            launched[k, network.name] = run_id
     timed = time.perf_counter()
     run_jobs(rt, workers)
     train_wall_s = time.perf_counter() - timed
@@ -152,7 +182,7 @@ def run_fusion_bench(work_dir: Path, *, seeds: int = 1, steps: int = DEFAULT_STE
         "per_seed": [{"seed": k, "train_seed": seed, "runs": runs[k]["runs"], "methods": _rounded(runs[k]["methods"])}
                      for k, seed in enumerate(train_seeds)],
         "seeds": seeds, "split_seed": SPLIT_SEED, "train_seeds": train_seeds, "steps": steps, "preset": "lite",
-        "size": f"{SIZE[0]}x{SIZE[1]}", "workers": workers,
+        "overrides": overrides, "size": f"{SIZE[0]}x{SIZE[1]}", "workers": workers, "reused_runs": reused,
         "networks": {n.name: {"overrides": dict(n.overrides), "methods": list(n.methods)} for n in networks},
         "pretrained": None if trunk is None else {"file": trunk.name, "sha256": trunk.sha256, "recipe": trunk.recipe,
                                                   "init": init_report},
@@ -168,7 +198,7 @@ def run_fusion_bench(work_dir: Path, *, seeds: int = 1, steps: int = DEFAULT_STE
 
 
 def _inits(rt: Runtime, trunk: Trunk | None, networks: tuple[Network, ...], train_seeds: list[int],
-           steps: int) -> tuple[dict[tuple[int, str], Path], dict[str, Any]]:
+           steps: int, overrides: Mapping[str, Any]) -> tuple[dict[tuple[int, str], Path], dict[str, Any]]:
     """Per (seed index, network) the init checkpoint composed from ``trunk`` (none without one), and per
     network what it loaded from the trunk and what started fresh (the same names for every seed)."""
     paths: dict[tuple[int, str], Path] = {}
@@ -176,31 +206,48 @@ def _inits(rt: Runtime, trunk: Trunk | None, networks: tuple[Network, ...], trai
     if trunk is None:
         return paths, report
     for network in networks:
-        config = load_preset("lite", network_overrides(network, steps))
+        config = load_preset("lite", network_overrides(network, steps, overrides))
+        name = hashlib.sha256(json.dumps(config.to_dict(), sort_keys=True).encode()).hexdigest()[:12]
         for k, seed in enumerate(train_seeds):
-            path = rt.settings.home / "inits" / f"{network.name}-seed{seed}-{trunk.sha256[:12]}.pt"
+            path = rt.settings.home / "inits" / f"{network.name}-{name}-seed{seed}-{trunk.sha256[:12]}.pt"
             report[network.name] = compose_init(trunk, config, seed, path)
             paths[k, network.name] = path
     return paths, report
 
 
-def _held_out(split: str) -> tuple[list[StereoSample], float, dict[str, Any]]:
-    """The pairs of ``split``, the seconds rendering them took, and what describes them."""
-    if split not in SPLITS:
+def held_out_seeds(split: str | None, mono: str) -> tuple[int, ...]:
+    """The seeds of the held-out pairs with monocular input ``mono`` (MONO_FAMILIES): the realistic
+    one's pairs of ``split`` (SPLITS; None: test), the warp one's CORRUPTION_SEEDS, which take no split.
+    ValueError naming what does not fit."""
+    if mono not in MONO_FAMILIES:
+        raise ValueError(f"unknown mono {mono!r}; choose {' or '.join(MONO_FAMILIES)}")
+    if mono == "warp":
+        if split is not None:
+            raise ValueError("the warp mono's pairs have seeds of their own (CORRUPTION_SEEDS): no split")
+        return CORRUPTION_SEEDS
+    if (split or "test") not in SPLITS:
         raise ValueError(f"unknown split {split!r}; choose {' or '.join(SPLITS)}")
+    return SPLITS[split or "test"]
+
+
+def _held_out(split: str | None, mono: str = "realistic") -> tuple[list[StereoSample], float, dict[str, Any]]:
+    """The pairs of ``split`` and ``mono`` (:func:`held_out_seeds`), the seconds rendering them took, and
+    what describes them (``split`` None with the warp mono)."""
+    seeds = held_out_seeds(split, mono)
     started = time.perf_counter()
-    pairs = held_out_samples(SPLITS[split])
+    pairs = held_out_samples(seeds, mono=mono)
     values = np.concatenate([s.disparity[np.isfinite(s.disparity)] for s in pairs])
-    info = {"split": split, "seeds": list(SPLITS[split]), "samples": len(pairs), "disparity_px": _range(values),
-            "baseline_m": HELD_OUT_BASELINE_M, "sha256": pairs_digest(pairs)}
+    info = {"split": (split or "test") if mono == "realistic" else None, "mono": mono, "seeds": list(seeds),
+            "samples": len(pairs), "disparity_px": _range(values), "baseline_m": HELD_OUT_BASELINE_M,
+            "sha256": pairs_digest(pairs)}
     return pairs, time.perf_counter() - started, info
 
 
-def held_out_samples(seeds: Iterable[int], frames: int = FRAMES) -> list[StereoSample]:
-    """The held-out rendered pairs: ``frames`` of each seed, at SIZE and HELD_OUT_BASELINE_M (see
-    :func:`video_samples`). Nothing of the training data enters them."""
+def held_out_samples(seeds: Iterable[int], frames: int = FRAMES, *, mono: str = "realistic") -> list[StereoSample]:
+    """The held-out rendered pairs: ``frames`` of each seed, at SIZE and HELD_OUT_BASELINE_M, with the
+    monocular input ``mono`` (see :func:`video_samples`). Nothing of the training data enters them."""
     return [sample for seed in seeds
-            for sample in video_samples(render_video(seed, frames, *SIZE, baseline_m=HELD_OUT_BASELINE_M))]
+            for sample in video_samples(render_video(seed, frames, *SIZE, baseline_m=HELD_OUT_BASELINE_M), mono)]
 
 
 def test_samples(_train_range: object, seeds: tuple[int, ...] = TEST_SEEDS,
@@ -210,9 +257,10 @@ def test_samples(_train_range: object, seeds: tuple[int, ...] = TEST_SEEDS,
     return held_out_samples(seeds, frames), HELD_OUT_BASELINE_M
 
 
-def video_samples(video: SyntheticVideo) -> list[StereoSample]:
+def video_samples(video: SyntheticVideo, mono: str = "realistic") -> list[StereoSample]:
     """A rendered video's frames as samples: regions all / picture / mirror / non_illusion; mono = the
-    realistic monocular disparity; meta ``seed`` and ``mirror_fooling_px`` (frames with mirror pixels)."""
+    realistic monocular disparity, or with ``mono="warp"`` the frame's :func:`warped_mono`; meta ``seed``
+    and ``mirror_fooling_px`` (frames with mirror pixels)."""
     samples = []
     for frame in video.frames:
         masks = {pair.illusion_type: pair.illusion for pair in frame.regions}
@@ -224,7 +272,8 @@ def video_samples(video: SyntheticVideo) -> list[StereoSample]:
         samples.append(StereoSample(
             name=f"{video.name}/{frame.index:04d}", left=frame.left, right=frame.right,
             disparity=frame.disparity, regions=make_regions(frame.disparity, {**masks, "non_illusion": ~illusion}),
-            mono=frame.mono_disparity, meta={"seed": video.seed, **fooling}))
+            mono=frame.mono_disparity if mono == "realistic" else warped_mono(frame.mono_ideal, video.seed, frame.index),
+            meta={"seed": video.seed, **fooling}))
     return samples
 
 
@@ -432,11 +481,12 @@ def split_keeping_seeds(version: Mapping[str, Any], count: int) -> list[int]:
                        f"{SPLIT_SEED} does; fewer seeds, or fewer videos, would do")
 
 
-def run_mono_bench(*, split: str = "test") -> dict[str, Any]:
-    """mono-gt-align on the held-out pairs of ``split``, no training: EPE and bad-2 per region, the
-    non-illusion bad-2 (the monocular model's calibration figure) on top, and the pairs' conditions."""
+def run_mono_bench(*, split: str | None = None, mono: str = "realistic") -> dict[str, Any]:
+    """mono-gt-align on the held-out pairs of ``split`` and ``mono`` (:func:`held_out_seeds`), no training:
+    EPE and bad-2 per region, the non-illusion bad-2 (the monocular model's calibration figure) on top,
+    and the pairs' conditions."""
     started = time.perf_counter()
-    pairs, _render_s, info = _held_out(split)
+    pairs, _render_s, info = _held_out(split, mono)
     figures = mono_figures(pairs)
     return {"non_illusion_bad2": figures["non_illusion"]["bad2"], "methods": {"mono_gt_align": figures},
             "size": f"{SIZE[0]}x{SIZE[1]}", "pairs": info,
@@ -470,9 +520,57 @@ def _seed_scores(rt: Runtime, k: int, pairs: list[StereoSample], networks: tuple
     return {"methods": figures, "runs": runs, "train_s": train_s, "score_s": score_s}
 
 
-def network_overrides(network: Network, steps: int) -> dict[str, Any]:
-    """The overrides of ``lite`` that ``network`` is trained with for ``steps`` steps."""
-    return {**TRAIN_OVERRIDES, "train.steps": steps, **network.overrides}
+def network_overrides(network: Network, steps: int, overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The overrides of ``lite`` that ``network`` is trained with for ``steps`` steps, the benchmark's
+    ``overrides`` on top of TRAIN_OVERRIDES (the network's own win: an ablation stays one)."""
+    return {**TRAIN_OVERRIDES, "train.steps": steps, **(overrides or {}), **network.overrides}
+
+
+def model_fingerprint() -> str:
+    """sha256 over the ``model`` package's source files (names and bytes): what a trained network's
+    behaviour depends on besides its config (which :func:`network_key` holds resolved, so a preset
+    file's edit matters only where it changes the config), seed and starting weights."""
+    root = Path(model.__file__).parent
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        digest.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()
+
+
+# Config fields (by prefix) of what a stereo-only network (model.use_mono off) has none of: its VLM,
+# flow, confidence and fusion, and their losses.
+FUSION_ONLY_FIELDS = {"model": ("vlm_", "lora_", "flow_", "token_downsample", "confidence_", "fusion_"),
+                      "train": ("focal_", "confidence_", "ce_weight")}
+
+
+def network_key(overrides: Mapping[str, Any], seed: int, trunk: Trunk | None, fingerprint: str) -> str:
+    """What makes a benchmark network, hashed: ``lite``'s resolved config under ``overrides``, the launch
+    seed, the trunk it starts from and the model code's :func:`model_fingerprint`."""
+    config = load_preset("lite", overrides).to_dict()
+    if not config["model"]["use_mono"]:  # stereo only: what it never builds or trains cannot make it differ
+        config = {section: {k: v for k, v in fields.items() if not k.startswith(FUSION_ONLY_FIELDS[section])}
+                  if section in FUSION_ONLY_FIELDS else fields for section, fields in config.items()}
+    made = {"config": config, "seed": seed, "trunk": None if trunk is None else trunk.sha256, "model": fingerprint}
+    return hashlib.sha256(json.dumps(made, sort_keys=True).encode()).hexdigest()
+
+
+def finished_run(rt: Runtime, ledger: Path, key: str) -> int | None:
+    """The run the workspace's ``ledger`` (TRAINED) holds for ``key`` when it succeeded and its best
+    checkpoint is there; None: the network is still to train."""
+    runs = json.loads(ledger.read_text()) if ledger.is_file() else {}
+    run_id = runs.get(key)
+    if run_id is None:
+        return None
+    with rt.sessions() as s:
+        run = s.get(TrainingRun, run_id)
+        done = run is not None and run.state == RunState.succeeded
+    return run_id if done and trained_checkpoint_path(rt, run_id).is_file() else None
+
+
+def record_run(ledger: Path, key: str, run_id: int) -> None:
+    """Add ``key`` → ``run_id`` to the workspace's ``ledger`` (atomically)."""
+    runs = json.loads(ledger.read_text()) if ledger.is_file() else {}
+    atomic_write_bytes(ledger, (json.dumps({**runs, key: run_id}, indent=1) + "\n").encode())
 
 
 def launch_run(rt: Runtime, seed: int, overrides: Mapping[str, Any], *, split: str = SPLIT,
@@ -495,7 +593,12 @@ def trained_checkpoint(rt: Runtime, run_id: int) -> tuple[Path, float]:
     with rt.sessions() as s:
         job = s.get(Job, s.get(TrainingRun, run_id).job_id)
         seconds = (job.finished_at - job.started_at).total_seconds()
-    return training.run_dir(rt.settings.runs_dir, run_id) / "checkpoints" / "best.pt", seconds
+    return trained_checkpoint_path(rt, run_id), seconds
+
+
+def trained_checkpoint_path(rt: Runtime, run_id: int) -> Path:
+    """Where run ``run_id``'s best checkpoint is."""
+    return training.run_dir(rt.settings.runs_dir, run_id) / "checkpoints" / "best.pt"
 
 
 def _score(pairs: list[StereoSample], methods: dict[str, Predict]) -> dict[str, dict[str, dict[str, float]]]:

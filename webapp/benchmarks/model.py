@@ -1,8 +1,10 @@
 """The fusion model's budget (issue 10): the ``lite`` preset on one 1920×1080 pair, timed in a
-process of its own (peak resident memory from that child's ``getrusage``), beside OpenCV SGBM
+process of its own (peak resident memory: that child's own VmHWM), beside OpenCV SGBM
 on the same pair in the same run and RAFT-Stereo's own network (the ``raft-stereo`` preset at its
 published sizes and 32 test iterations, what an imported checkpoint runs); parameters per module;
-training steps/s at the lite crop.
+training steps/s at the lite crop. The lite VLM's EfficientNet-Lite0 eye (``vlm_eye``): lite with
+it on the same pair beside lite without it, the eye's own stride-16 features at the size lite's
+VLM sees, and its parameters.
 
 The networks are randomly initialised: speed and memory do not depend on the weights.
 """
@@ -15,15 +17,22 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
 
 from dataset.synthetic import render_video
 
+if TYPE_CHECKING:
+    import torch
+
+    from model.efficientnet_lite import EfficientNetLite0
+
 # Lite budgets on this class of 2-core machine.
 BUDGET_S, BUDGET_MB = 3.0, 3072.0
+# lite with its VLM's image tokens from the EfficientNet-Lite0 eye (its random build: same cost, no package needed)
+EYE = {"vlm_eye": "efficientnet-lite0", "vlm_eye_weights": "random"}
 
 
 def _pair(width: int, height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -44,36 +53,81 @@ def sgbm_seconds(left: np.ndarray, right: np.ndarray, repeats: int) -> float:
     return min(times)
 
 
-def _child(pair_file: str, repeats: int, preset: str = "lite") -> None:
-    """Runs in the subprocess: ``preset``'s inference on the saved pair, prints one JSON line."""
-    import resource
+def peak_mb() -> float:
+    """This process's peak resident memory, MB: the VmHWM of its own address space. (getrusage's
+    ru_maxrss would not do: on Linux a child's carries its parent's peak across fork and exec.)"""
+    with open("/proc/self/status") as handle:
+        for line in handle:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+    raise RuntimeError("/proc/self/status has no VmHWM line")
 
+
+def _child(pair_file: str, repeats: int, preset: str = "lite", overrides: dict[str, Any] | None = None) -> None:
+    """Runs in the subprocess: ``preset``'s inference on the saved pair, prints one JSON line."""
     import torch
 
     from model.network import FusionNetwork
     from model.predictor import Predictor
     from model.presets import load_preset
+    from model.vlm import EyeVlm
 
     data = np.load(pair_file)
-    config = load_preset(preset)
+    config = load_preset(preset, overrides)
     torch.manual_seed(0)
-    predictor = Predictor(FusionNetwork(config.model), config)
+    network = FusionNetwork(config.model)
+    shown: list[torch.Size] = []  # the left image's size as the predictor gives it to the eye
+    if isinstance(network.vlm, EyeVlm):
+        network.vlm.register_forward_pre_hook(lambda _module, args: shown.append(args[0].shape))
+    predictor = Predictor(network, config)
     times = []
     for _ in range(repeats):
         started = time.perf_counter()
         predictor.predict(data["left"], data["right"], data["mono"])
         times.append(time.perf_counter() - started)
-    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    print(json.dumps({"seconds": min(times), "peak_mb": peak_mb, "threads": torch.get_num_threads(),
-                      "iters": config.train.test_iters}))
+    result = {"seconds": min(times), "peak_mb": peak_mb(), "threads": torch.get_num_threads(),
+              "iters": config.train.test_iters}
+    if isinstance(network.vlm, EyeVlm):
+        result["eye_s"] = eye_seconds(network.vlm.backbone, torch.rand(shown[-1]) * 2 - 1, repeats)
+        result["eye_input"] = list(shown[-1][2:])
+    print(json.dumps(result))
 
 
-def _timed(pair_file: Path, repeats: int, preset: str) -> dict[str, Any]:
-    """``preset`` on the pair in a process of its own: {"seconds", "peak_mb", "threads", "iters"}."""
-    code = f"from webapp.benchmarks.model import _child; _child({str(pair_file)!r}, {repeats}, {preset!r})"
+def eye_seconds(eye: EfficientNetLite0, image: torch.Tensor, repeats: int) -> float:
+    """Best wall time of the EfficientNet-Lite0 ``eye``'s stride-16 features of ``image`` (B×3×H×W in [−1, 1])."""
+    import torch
+
+    from model.vlm import EYE_STRIDE
+
+    times = []
+    with torch.inference_mode():
+        for _ in range(repeats):
+            started = time.perf_counter()
+            eye.features(image, stride=EYE_STRIDE)
+            times.append(time.perf_counter() - started)
+    return min(times)
+
+
+def eye_parameters() -> dict[str, int]:
+    """The eye's parameters: ``frozen``, all of EfficientNet-Lite0 (the package's state dict);
+    ``frozen_used``, those its stride-16 features run; ``vlm_trainable``, the lite VLM's with the eye."""
+    from model.efficientnet_lite import load_efficientnet_lite0
+    from model.vlm import EYE_STRIDE
+
+    eye = load_efficientnet_lite0("random")
+    return {"frozen": eye.parameter_count(), "frozen_used": eye.parameter_count(EYE_STRIDE),
+            "vlm_trainable": parameters_per_module(EYE)["vlm"]}
+
+
+def _timed(pair_file: Path, repeats: int, preset: str, overrides: dict[str, Any] | None = None) -> dict[str, Any]:
+    """``preset`` (with ``overrides``) on the pair in a process of its own: {"seconds", "peak_mb",
+    "threads", "iters"}, and with the eye on {"eye_s", "eye_input"}."""
+    code = (f"from webapp.benchmarks.model import _child; "
+            f"_child({str(pair_file)!r}, {repeats}, {preset!r}, {overrides!r})")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
     if done.returncode != 0:
-        raise RuntimeError(f"the {preset} benchmark process failed: {done.stderr.strip().splitlines()[-1:]}")
+        raise RuntimeError(f"the {preset} {overrides or ''} benchmark process failed: "
+                           f"{done.stderr.strip().splitlines()[-1:]}")
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
@@ -126,12 +180,18 @@ def run_model_bench(repeats: int = 2, train_steps: int = 3, raft_stereo: bool = 
         pair_file = Path(tmp) / "pair.npz"
         np.savez(pair_file, left=left, right=right, mono=mono)
         child = _timed(pair_file, repeats, "lite")
+        eye = _timed(pair_file, repeats, "lite", EYE)
         raft = _timed(pair_file, 1, "raft-stereo") if raft_stereo else None
     with open("/proc/loadavg") as handle:
         load = float(handle.read().split()[0])
     return {
         "lite_1080p_s": round(child["seconds"], 3),
         "lite_1080p_peak_mb": round(child["peak_mb"], 1),
+        "lite_eye_1080p_s": round(eye["seconds"], 3),
+        "lite_eye_1080p_peak_mb": round(eye["peak_mb"], 1),
+        "eye_features_s": round(eye["eye_s"], 3),
+        "eye_input": eye["eye_input"],
+        "eye_parameters": eye_parameters(),
         "sgbm_1080p_s": round(sgbm_seconds(left, right, repeats), 3),
         **({"raft_stereo_1080p_s": round(raft["seconds"], 3), "raft_stereo_1080p_peak_mb": round(raft["peak_mb"], 1),
             "raft_stereo_iters": raft["iters"]} if raft is not None else {}),

@@ -179,48 +179,81 @@ def model_benchmark(as_json: bool, repeats: int, train_steps: int, no_raft_stere
     _report(run_model_bench(repeats=repeats, train_steps=train_steps, raft_stereo=not no_raft_stereo), as_json)
 
 
+def _lite_overrides(_ctx: click.Context, param: click.Parameter, values: tuple[str, ...]) -> dict[str, str]:
+    """``KEY=VALUE`` options as overrides of ``lite``, checked against its config (BadParameter naming
+    the first that does not fit)."""
+    from model.presets import load_preset
+
+    overrides: dict[str, str] = {}
+    for value in values:
+        key, sep, text = value.partition("=")
+        if not sep or not key.strip():
+            raise click.BadParameter(f"{value!r} is not KEY=VALUE", param=param)
+        overrides[key.strip()] = text.strip()
+    try:
+        load_preset("lite", overrides)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param=param) from None
+    return overrides
+
+
 @bench.command("fusion")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("--seeds", type=click.IntRange(min=1), default=1, show_default=True,
               help="Training runs per network, all on the same train/val split; figures are their mean and spread, "
                    "and fusion's differences paired by seed.")
-@click.option("--steps", type=click.IntRange(min=1), default=None, help="Training steps per run (default: the benchmark's).")
+@click.option("--steps", type=click.IntRange(min=1), default=None,
+              help="Training steps per run (default: 1500 from scratch, 500 fine-tuning from the trunk).")
 @click.option("--work-dir", type=click.Path(file_okay=False, path_type=Path), default=Path("var/bench-fusion"),
               show_default=True, help="Where the prepared data (and the pre-trained trunk) is cached between runs.")
 @click.option("--mono-only", is_flag=True,
               help="No training: score mono-gt-align alone on the held-out pairs (the monocular input's calibration).")
 @click.option("--ablations", is_flag=True,
               help="Per seed, also train the no-VLM network (use_vlm = false) and the stereo-only one (use_mono = false).")
-@click.option("--split", type=click.Choice(["test", "val"]), default="test", show_default=True,
-              help="The held-out pairs scored: val (seeds of its own) to decide on, test once, at the end.")
+@click.option("--split", type=click.Choice(["test", "val"]), default=None,
+              help="The realistic mono's held-out pairs scored: val (seeds of its own) to decide on, test once, at "
+                   "the end. Default: test. Not with --mono warp, whose pairs have seeds of their own.")
+@click.option("--mono", type=click.Choice(["realistic", "warp"]), default="realistic", show_default=True,
+              help="The held-out pairs' monocular input: realistic (the family training shows; --split's pairs) or "
+                   "warp (another family: a smooth warp of the scene's mono-fooled disparity, blur, noise and an "
+                   "unknown affine, on seeds 300-303 of its own). Trained networks are reused: scoring warp after "
+                   "val or test trains nothing.")
 @click.option("--workers", type=click.IntRange(1, 64), default=1, show_default=True,
               help="Trainings run side by side (each one process; give each a core: OMP_NUM_THREADS=1 on 2 cores).")
 @click.option("--pretrained", type=click.Path(dir_okay=False, exists=True, path_type=Path), default=None,
               help="Fine-tune every network from this trunk (`bench pretrain`'s trunk.safetensors, trunk.json beside "
                    "it). Default: WORK_DIR/pretrain/trunk.safetensors when it exists.")
 @click.option("--scratch", is_flag=True, help="Train from scratch even when WORK_DIR holds a pre-trained trunk.")
+@click.option("--set", "settings", multiple=True, metavar="KEY=VALUE", callback=_lite_overrides,
+              help="Override lite's config for every network (repeatable), e.g. --set model.fusion_gate=false: "
+                   "how a design is compared with another on the same data, seeds and trunk.")
 def fusion_benchmark(as_json: bool, seeds: int, steps: int | None, work_dir: Path, mono_only: bool,
-                     ablations: bool, split: str, workers: int, pretrained: Path | None, scratch: bool) -> None:
+                     ablations: bool, split: str | None, mono: str, workers: int, pretrained: Path | None,
+                     scratch: bool, settings: dict[str, str]) -> None:
     """The synthetic illusion benchmark: train lite on the product's own samples and rendered captures
     (fine-tuned from the pre-trained trunk when there is one), score fusion, stereo, mono-gt-align and
     sgbm (with --ablations also the no-VLM network's fusion and stereo branch, and stereo_only) on frozen
-    held-out rendered pairs (all, picture, mirror, non-illusion)."""
-    from webapp.benchmarks.fusion import DEFAULT_STEPS, run_fusion_bench, run_mono_bench
+    held-out rendered pairs (all, picture, mirror, non-illusion), their monocular input the realistic
+    estimator's or, with --mono warp, one of another family."""
+    from webapp.benchmarks.fusion import DEFAULT_STEPS, FINETUNE_STEPS, run_fusion_bench, run_mono_bench
     from webapp.benchmarks.trunk import TRUNK_FILE
 
+    if mono == "warp" and split is not None:
+        raise click.UsageError("--mono warp scores pairs of seeds of their own: --split is for the realistic mono's pairs")
     if mono_only:
-        if ablations or workers > 1 or pretrained or scratch:
-            raise click.UsageError("--ablations, --workers, --pretrained and --scratch are about training, and "
+        if ablations or workers > 1 or pretrained or scratch or settings:
+            raise click.UsageError("--ablations, --workers, --pretrained, --scratch and --set are about training, and "
                                    "--mono-only trains nothing: pass one or the other")
-        _report(run_mono_bench(split=split), as_json)
+        _report(run_mono_bench(split=split, mono=mono), as_json)
         return
     if pretrained and scratch:
         raise click.UsageError("--pretrained names a trunk to start from and --scratch starts from none: pass one")
     work_dir = work_dir.absolute()
     found = work_dir / TRUNK_FILE
     trunk = None if scratch else pretrained or (found if found.is_file() else None)
-    results = run_fusion_bench(work_dir, seeds=seeds, steps=steps or DEFAULT_STEPS, ablations=ablations,
-                               split=split, workers=workers, pretrained=trunk)
+    steps = steps or (DEFAULT_STEPS if trunk is None else FINETUNE_STEPS)
+    results = run_fusion_bench(work_dir, seeds=seeds, steps=steps, ablations=ablations, split=split, mono=mono,
+                               workers=workers, pretrained=trunk, overrides=settings)
     if as_json:
         click.echo(json.dumps(results))
         return
@@ -260,13 +293,15 @@ def _print_fusion(results: dict[str, Any]) -> None:
     """The fusion benchmark for people: the pairs, the conditions, every method's figures, fusion's paired
     differences, the trunk it started from and the timings."""
     pairs = results["pairs"]
-    click.echo(f"held-out pairs: {pairs['split']}, seeds {pairs['seeds'][0]}-{pairs['seeds'][-1]}, {pairs['samples']} pairs "
-               f"at {pairs['baseline_m']} m, disparity {pairs['disparity_px'][0]}-{pairs['disparity_px'][1]} px "
+    name = pairs["split"] or pairs["mono"]
+    click.echo(f"held-out pairs: {name}, mono {pairs['mono']}, seeds {pairs['seeds'][0]}-{pairs['seeds'][-1]}, "
+               f"{pairs['samples']} pairs at {pairs['baseline_m']} m, "
+               f"disparity {pairs['disparity_px'][0]}-{pairs['disparity_px'][1]} px "
                f"(training {results['train_disparity_px'][0]}-{results['train_disparity_px'][1]}), "
                f"sha256 {pairs['sha256'][:16]}")
     training = results["conditions"]["training"]
     _print_conditions({"training captures": training["captures"], "training generated": training["generated"],
-                       f"{pairs['split']} pairs": results["conditions"]["held_out"]})
+                       f"{name} pairs": results["conditions"]["held_out"]})
     seeds = results["seeds"]
     click.echo(f"EPE px / bad-2 %, mean{' ± spread' if seeds > 1 else ''} over {seeds} seed(s) "
                f"(launch seeds {results['train_seeds']}, split of seed {results['split_seed']})")
