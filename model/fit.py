@@ -19,7 +19,6 @@ from typing import Any
 
 from dataset.services.errors import FieldError
 from dataset.settings import Settings
-from model.efficientnet_lite import package_weights_file
 from model.presets import Config
 
 # (preset, device) → (base MB per rank, MB per megapixel of crop per GRU iteration).
@@ -82,7 +81,12 @@ def frozen_weights_mb(config: Config) -> float:
             total += sum(p.stat().st_size for p in Path(directory).rglob("*") if p.suffix in WEIGHT_SUFFIXES)
     if model.use_vlm and model.vlm_backend == "lite" and model.vlm_eye == "efficientnet-lite0" \
             and model.vlm_eye_weights == "package":
-        total += package_weights_file().stat().st_size
+        from model.efficientnet_lite import package_weights_file  # torch: only where the eye is on
+
+        try:
+            total += package_weights_file().stat().st_size
+        except ValueError as exc:
+            raise FieldError("preset", str(exc)) from None
     return total / 2**20
 
 

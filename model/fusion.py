@@ -66,15 +66,14 @@ def refine_affine(params: Tensor, confidence: Tensor, *, kernel: int | None) -> 
 
 
 def blend(stereo: Tensor, aligned: Tensor, confidence: Tensor, *, gate: bool) -> Tensor:
-    """c·D_s + (1−c)·D̃_m (B×1×h×w each); with ``gate`` the forward value is D_s where c ≥ 0.5 and D̃_m
-    elsewhere while the gradient is the soft blend's (straight-through), so training still tells the
-    confidence which way to move, but a pixel stereo gets right is never pulled towards a mono that errs
-    on the same side of the truth."""
-    soft = confidence * stereo + (1 - confidence) * aligned
+    """c·D_s + (1−c)·D̃_m (B×1×h×w each); with ``gate`` the value is D_s where c ≥ 0.5 and D̃_m
+    elsewhere, each branch's gradient flowing only where it was chosen, and the confidence's gradient
+    the soft blend's, D_s − D̃_m (straight-through): training still tells the confidence which way to
+    move, but a pixel stereo gets right is never pulled towards a mono that errs on its side."""
     if not gate:
-        return soft
+        return confidence * stereo + (1 - confidence) * aligned
     hard = torch.where(confidence >= 0.5, stereo, aligned)
-    return soft + (hard - soft).detach()
+    return hard + (confidence - confidence.detach()) * (stereo - aligned).detach()
 
 
 class GlobalFusion(nn.Module):

@@ -40,12 +40,14 @@ class VlmResult:
     prompt: Tensor  # B×M×dim: FLOW_PROMPT's tokens (the flow's text condition)
 
 
-def sincos_2d(height: int, width: int, dim: int, device: torch.device) -> Tensor:
-    """(height·width)×dim fixed 2D sine–cosine position embedding (row-major tokens)."""
+def sincos_2d(height: int, width: int, dim: int, device: torch.device, step: float = 1.0) -> Tensor:
+    """(height·width)×dim fixed 2D sine–cosine position embedding (row-major tokens) of the
+    coordinates index·``step``: tokens of another stride than the flow's encode the same image
+    position as the flow's token there when ``step`` is their stride over the flow's."""
     quarter = dim // 4
     freqs = 1.0 / (10000 ** (torch.arange(quarter, device=device, dtype=torch.float32) / max(quarter, 1)))
-    ys, xs = torch.meshgrid(torch.arange(height, device=device, dtype=torch.float32),
-                            torch.arange(width, device=device, dtype=torch.float32), indexing="ij")
+    ys, xs = torch.meshgrid(torch.arange(height, device=device, dtype=torch.float32) * step,
+                            torch.arange(width, device=device, dtype=torch.float32) * step, indexing="ij")
     parts = [f(c.reshape(-1, 1) * freqs) for c in (ys, xs) for f in (torch.sin, torch.cos)]
     embedding = torch.cat(parts, dim=1)
     return nn.functional.pad(embedding, (0, dim - embedding.shape[1]))
@@ -84,6 +86,8 @@ class LiteVlm(nn.Module):
     def __init__(self, config: ModelConfig, shown_channels: int = 5, patch: int | None = None) -> None:
         super().__init__()
         self.dim, self.patch = config.vlm_dim, patch or config.vlm_patch
+        # Positions in units of the flow's tokens, which cross-attend to these (1 where the patch is theirs).
+        self.position_step = self.patch / 2**config.token_downsample
         self.embed = nn.Conv2d(shown_channels, self.dim, self.patch, stride=self.patch)
         self.vlm_prompt = PromptTokens(VLM_PROMPT, self.dim)
         self.flow_prompt = PromptTokens(FLOW_PROMPT, self.dim)
@@ -96,7 +100,8 @@ class LiteVlm(nn.Module):
         batch = left.shape[0]
         patches = self.image_tokens(left, stereo, mono)
         height, width = patches.shape[2:]
-        tokens = patches.flatten(2).transpose(1, 2) + sincos_2d(height, width, self.dim, left.device)
+        tokens = patches.flatten(2).transpose(1, 2) + sincos_2d(height, width, self.dim, left.device,
+                                                                self.position_step)
         tokens = self.encoder(torch.cat([tokens, self.vlm_prompt(batch)], dim=1))
         return VlmResult(tokens, self.flow_prompt(batch))
 

@@ -221,7 +221,9 @@ def test_cli_passes_ablations_split_and_the_trunk(tmp_path: Path, monkeypatch: p
     assert result.exit_code == 0, result.output
     assert calls[0]["overrides"] == {"model.fusion_gate": "false", "confidence_loss": "focal"}
     for bad, message in ((["--set", "fusion_gate"], "KEY=VALUE"), (["--set", "model.fusion_gate=maybe"], "true or false"),
-                         (["--set", "model.nope=1"], "unknown config key")):
+                         (["--set", "model.nope=1"], "unknown config key"), (["--set", "train.steps=5"], "--steps"),
+                         (["--set", "seed=3"], "benchmark's own"),
+                         (["--ablations", "--set", "mono_backend=depth-anything-v2"], "the stereo_only network")):
         result = CliRunner().invoke(main, ["bench", "fusion", *bad, *work])
         assert result.exit_code == 2 and message in result.output, bad
     trunk = tmp_path / "pretrain" / "trunk.safetensors"
@@ -262,6 +264,12 @@ def test_a_trained_network_is_reused_only_when_everything_that_makes_it_is_equal
     stereo_only = [fusion.network_key(fusion.network_overrides(fusion.ABLATIONS[1], 20, design), 7, None, "code")
                    for design in ({}, {"model.fusion_gate": True, "train.confidence_loss": "ce", "model.flow_noise": False})]
     assert stereo_only[0] == stereo_only[1]  # the fusion-only fields do not make a stereo-only network
+    no_vlm = [fusion.network_key(fusion.network_overrides(fusion.ABLATIONS[0], 20, design), 7, None, "code")
+              for design in ({}, {"model.flow_noise": False, "model.vlm_eye": "efficientnet-lite0"},
+                             {"model.fusion_gate": True})]
+    assert no_vlm[0] == no_vlm[1] != no_vlm[2]  # nor the VLM's a no-VLM one; its fusion's do
+    assert fusion.network_key(fusion.network_overrides(fusion.ABLATIONS[1], 20, {"model.token_downsample": 4}),
+                              7, None, "code") != stereo_only[0]  # the token grid sets its size multiple
     assert stereo_only[0] != fusion.network_key(fusion.network_overrides(fusion.ABLATIONS[1], 20, {"train.lr": 1e-3}),
                                                 7, None, "code")
     assert len(fusion.model_fingerprint()) == 64
@@ -275,7 +283,10 @@ def test_a_trained_network_is_reused_only_when_everything_that_makes_it_is_equal
     fusion.record_run(ledger, key, run_id)
     fusion.record_run(ledger, others[0], run_id + 1)
     assert json.loads(ledger.read_text()) == {key: run_id, others[0]: run_id + 1}
-    assert fusion.finished_run(rt, ledger, key) is None  # still running
+    assert fusion.finished_run(rt, ledger, key) is None  # cut off while running: trained anew
+    with transaction(rt.sessions) as s:
+        s.get(TrainingRun, run_id).state = RunState.queued
+    assert fusion.finished_run(rt, ledger, key) == run_id  # launched, not yet run: this benchmark runs it
     with transaction(rt.sessions) as s:
         s.get(TrainingRun, run_id).state = RunState.succeeded
     assert fusion.finished_run(rt, ledger, key) is None  # no best checkpoint

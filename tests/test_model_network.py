@@ -12,8 +12,8 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from model.checkpoint import load_checkpoint, load_network, save_checkpoint  # noqa: E402
-from model.fusion import blend, refine_affine  # noqa: E402
-from model.losses import confidence_target, focal_terms, fusion_loss, sequence_gamma  # noqa: E402
+from model.fusion import GlobalFusion, blend, refine_affine  # noqa: E402
+from model.losses import confidence_target, confidence_terms, focal_terms, fusion_loss, sequence_gamma  # noqa: E402
 from model.network import FusionNetwork, FusionOutput  # noqa: E402
 from model.predictor import Predictor  # noqa: E402
 from model.presets import PRESETS, Config, load_preset  # noqa: E402
@@ -154,18 +154,39 @@ def test_the_loss_equals_a_hand_computation() -> None:
 
 
 def test_the_gate_takes_stereo_or_mono_whole_with_the_blends_gradient() -> None:
-    """Stereo 10 px, mono 4 px: the soft blend mixes them, the gate takes one whole by c ≥ 0.5, and the
-    gradients reaching c (straight-through) are the soft blend's, D_s − D̃_m per pixel."""
-    stereo, aligned = torch.full((1, 1, 1, 3), 10.0), torch.full((1, 1, 1, 3), 4.0)
+    """Stereo 10 px, mono 4 px: the soft blend mixes them, the gate takes one whole by c ≥ 0.5; the
+    gradients reaching c (straight-through) are the soft blend's, D_s − D̃_m per pixel, and each branch
+    gets gradient only where it was taken."""
     soft_c = torch.tensor([[[[0.2, 0.5, 0.9]]]], requires_grad=True)
     hard_c = soft_c.detach().clone().requires_grad_(True)
-    soft = blend(stereo, aligned, soft_c, gate=False)
-    hard = blend(stereo, aligned, hard_c, gate=True)
-    assert torch.allclose(soft, torch.tensor([[[[5.2, 7.0, 9.4]]]]))
-    assert hard.flatten().tolist() == [4.0, 10.0, 10.0]
-    soft.sum().backward()
-    hard.sum().backward()
+    branches = []
+    for c, gate in ((soft_c, False), (hard_c, True)):
+        stereo = torch.full((1, 1, 1, 3), 10.0, requires_grad=True)
+        aligned = torch.full((1, 1, 1, 3), 4.0, requires_grad=True)
+        out = blend(stereo, aligned, c, gate=gate)
+        out.sum().backward()
+        branches.append((out.detach(), stereo.grad.flatten().tolist(), aligned.grad.flatten().tolist()))
+    assert torch.allclose(branches[0][0], torch.tensor([[[[5.2, 7.0, 9.4]]]]))
+    assert branches[1][0].flatten().tolist() == [4.0, 10.0, 10.0]
     assert torch.equal(soft_c.grad, hard_c.grad) and torch.allclose(hard_c.grad, torch.full_like(hard_c, 6.0))
+    assert branches[1][1:] == ([0.0, 1.0, 1.0], [1.0, 0.0, 0.0])
+    assert branches[0][1] == pytest.approx([0.2, 0.5, 0.9])
+
+
+def test_the_network_gates_only_when_asked() -> None:
+    """The released rule upsamples the blend itself: with fusion_gate each low-resolution pixel is the
+    stereo's or the aligned mono's, as the confidence says; without it, a mix."""
+    generator = torch.Generator().manual_seed(0)
+    mono, stereo = torch.rand(1, 1, 4, 6, generator=generator), 5 + 10 * torch.rand(1, 1, 4, 6, generator=generator)
+    confidence = torch.rand(1, 1, 4, 6, generator=generator)
+    hidden, mask = torch.zeros(1, 16, 4, 6), torch.randn(1, 9 * 64, 4, 6, generator=generator)
+    for gate in (True, False):
+        config = load_preset("lite", {**SMALL, "fusion_rule": "released", "fusion_gate": gate}).model
+        torch.manual_seed(0)
+        result = GlobalFusion(config, 16)(mono, stereo, confidence, hidden, mask)
+        aligned = result.scale * mono + result.shift
+        mixed = torch.where(confidence >= 0.5, stereo, aligned) if gate else confidence * stereo + (1 - confidence) * aligned
+        assert torch.allclose(result.disparity, convex_upsample(mixed, mask, 8, config.upsample_border), atol=1e-4), gate
 
 
 def test_the_cross_entropy_confidence_loss_is_the_weighted_bce() -> None:
@@ -181,10 +202,9 @@ def test_the_cross_entropy_confidence_loss_is_the_weighted_bce() -> None:
     bce = -math.log(0.84)
     assert math.isclose(parts["confidence"], 3.0 * bce / (5 * 2 / 8), rel_tol=1e-5)
     pushes = []
-    for terms in (lambda x: torch.nn.functional.binary_cross_entropy_with_logits(x, torch.ones_like(x)),
-                  lambda x: focal_terms(x, torch.ones_like(x), 0.25, 2.0)):
+    for loss in ("ce", "focal"):
         logit = logits[..., :1].clone().requires_grad_(True)
-        terms(logit).sum().backward()
+        confidence_terms(logit, torch.ones_like(logit), load_preset("lite", {"confidence_loss": loss}).train).sum().backward()
         pushes.append(float(logit.grad))
     assert 50 < pushes[0] / pushes[1] < 60
     with pytest.raises(ValueError, match="train.ce_weight"):
@@ -210,7 +230,8 @@ def test_a_deterministic_flow_ignores_the_noise() -> None:
 
 @pytest.mark.parametrize("overrides", [{}, {"use_vlm": False}, {"confidence_image_features": False},
                                        {"fusion_rule": "released"},
-                                       {"fusion_gate": True, "flow_noise": False, "confidence_loss": "ce"}])
+                                       {"fusion_gate": True, "flow_noise": False, "confidence_loss": "ce"},
+                                       {"vlm_eye": "efficientnet-lite0", "vlm_eye_weights": "random"}])
 def test_gradients_reach_every_trainable_parameter(overrides: dict) -> None:
     config = load_preset("lite", {**SMALL, **overrides})
     torch.manual_seed(0)
@@ -219,7 +240,9 @@ def test_gradients_reach_every_trainable_parameter(overrides: dict) -> None:
     out = network(left, right, mono, iters=2, noise=torch.Generator().manual_seed(1))
     loss, _ = fusion_loss(out, gt, torch.ones_like(gt, dtype=torch.bool), config.train)
     loss.backward()
-    missing = [n for n, p in network.named_parameters() if p.grad is None or not p.grad.abs().sum() > 0]
+    trained = [(n, p) for n, p in network.named_parameters() if p.requires_grad]
+    assert {n.split(".")[1] for n, p in network.named_parameters() if not p.requires_grad} <= {"backbone"}
+    missing = [n for n, p in trained if p.grad is None or not p.grad.abs().sum() > 0]
     assert missing == []
     assert network.frozen_state_hashes() == {}
 

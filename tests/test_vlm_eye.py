@@ -7,7 +7,6 @@ from __future__ import annotations
 import subprocess
 import sys
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -24,7 +23,6 @@ from model.efficientnet_lite import (  # noqa: E402
     package_hash,
     package_weights_file,
 )
-from model.launch import backbone_dirs  # noqa: E402
 from model.mono import tensor_hash  # noqa: E402
 from model.network import FusionNetwork  # noqa: E402
 from model.presets import load_preset  # noqa: E402
@@ -106,7 +104,6 @@ def test_the_eye_vlm_builds_and_forwards(weights: str) -> None:
         assert network.frozen_paths() == {"vlm": PACKAGE}  # a package name, never a directory
     else:
         assert network.frozen_state_hashes() == {} and network.frozen_paths() == {}
-    assert backbone_dirs(config, SimpleNamespace()) == {}  # no setting names a directory for the eye
 
 
 def test_the_eye_keeps_sides_at_the_networks_multiple_without_the_patch_side() -> None:
@@ -188,3 +185,17 @@ def test_the_memory_estimate_counts_the_eyes_weights() -> None:
     assert frozen_weights_mb(load_preset("lite", {"vlm_eye": "efficientnet-lite0"})) == pytest.approx(size_mb)
     assert frozen_weights_mb(load_preset("lite", {"vlm_eye": "efficientnet-lite0", "vlm_eye_weights": "random"})) == 0
     assert frozen_weights_mb(load_preset("lite")) == 0
+
+
+def test_the_eyes_tokens_sit_where_the_flows_tokens_do() -> None:
+    """The flow's tokens (1/32) cross-attend to the eye's (1/16): the eye's token (2i, 2j) covers the
+    flow's token (i, j) and carries the same position code."""
+    config = load_preset("lite", {"vlm_eye": "efficientnet-lite0", "vlm_eye_weights": "random"}).model
+    vlm = EyeVlm(config)
+    assert vlm.position_step == EYE_STRIDE / 2**config.token_downsample == 0.5
+    from model.vlm import sincos_2d
+
+    eye = sincos_2d(6, 8, 64, torch.device("cpu"), vlm.position_step).view(6, 8, 64)
+    flow = sincos_2d(3, 4, 64, torch.device("cpu")).view(3, 4, 64)
+    assert torch.allclose(eye[::2, ::2], flow)
+    assert not torch.allclose(sincos_2d(6, 8, 64, torch.device("cpu")).view(6, 8, 64)[::2, ::2], flow)

@@ -144,6 +144,7 @@ def run_fusion_bench(work_dir: Path, *, seeds: int = 1, steps: int = DEFAULT_STE
     aligned mono error) of training and of the pairs, the disparity ranges, and the timings (seconds; a
     network's training time is its job's, from start to end)."""
     overrides = dict(overrides or {})
+    check_overrides(overrides, (FUSION, *ABLATIONS) if ablations else (FUSION,))
     started = time.perf_counter()
     trunk = load_trunk(pretrained) if pretrained is not None else None
     rt, cached, train_conditions = prepared_workspace(work_dir / "workspace")
@@ -526,6 +527,23 @@ def network_overrides(network: Network, steps: int, overrides: Mapping[str, Any]
     return {**TRAIN_OVERRIDES, "train.steps": steps, **(overrides or {}), **network.overrides}
 
 
+# What the benchmark itself sets on every run: `--steps` and the launch seeds (TRAIN_OVERRIDES too).
+OWNED_KEYS = ("steps", "seed")
+
+
+def check_overrides(overrides: Mapping[str, Any], networks: Iterable[Network]) -> None:
+    """ValueError naming the first of ``overrides`` that the benchmark sets itself (OWNED_KEYS) or that
+    does not fit ``lite`` as one of ``networks`` trains it."""
+    for key in overrides:
+        if key.rpartition(".")[2] in OWNED_KEYS:
+            raise ValueError(f"{key} is the benchmark's own (--steps, --seeds): it cannot be overridden")
+    for network in networks:
+        try:
+            load_preset("lite", network_overrides(network, DEFAULT_STEPS, overrides))
+        except ValueError as exc:
+            raise ValueError(f"the {network.name} network: {exc}") from None
+
+
 def model_fingerprint() -> str:
     """sha256 over the ``model`` package's source files (names and bytes): what a trained network's
     behaviour depends on besides its config (which :func:`network_key` holds resolved, so a preset
@@ -537,34 +555,41 @@ def model_fingerprint() -> str:
     return digest.hexdigest()
 
 
-# Config fields (by prefix) of what a stereo-only network (model.use_mono off) has none of: its VLM,
-# flow, confidence and fusion, and their losses.
-FUSION_ONLY_FIELDS = {"model": ("vlm_", "lora_", "flow_", "token_downsample", "confidence_", "fusion_"),
-                      "train": ("focal_", "confidence_", "ce_weight")}
+# Config fields (by prefix) of what a network does not build: without the VLM (model.use_vlm off) its
+# VLM and flow; stereo only (model.use_mono off) also its confidence and fusion, and their losses.
+UNBUILT_FIELDS: dict[str, dict[str, tuple[str, ...]]] = {
+    "use_vlm": {"model": ("vlm_", "lora_", "flow_")},
+    "use_mono": {"model": ("vlm_", "lora_", "flow_", "confidence_", "fusion_"),
+                 "train": ("focal_", "confidence_", "ce_weight")}}
 
 
 def network_key(overrides: Mapping[str, Any], seed: int, trunk: Trunk | None, fingerprint: str) -> str:
-    """What makes a benchmark network, hashed: ``lite``'s resolved config under ``overrides``, the launch
-    seed, the trunk it starts from and the model code's :func:`model_fingerprint`."""
+    """What makes a benchmark network, hashed: ``lite``'s resolved config under ``overrides`` (less the
+    fields of what it does not build, UNBUILT_FIELDS), the launch seed, the trunk it starts from and the
+    model code's :func:`model_fingerprint`."""
     config = load_preset("lite", overrides).to_dict()
-    if not config["model"]["use_mono"]:  # stereo only: what it never builds or trains cannot make it differ
-        config = {section: {k: v for k, v in fields.items() if not k.startswith(FUSION_ONLY_FIELDS[section])}
-                  if section in FUSION_ONLY_FIELDS else fields for section, fields in config.items()}
+    for switch, unbuilt in UNBUILT_FIELDS.items():
+        if not config["model"][switch]:
+            config = {**config, **{section: {k: v for k, v in config[section].items() if not k.startswith(prefixes)}
+                                   for section, prefixes in unbuilt.items()}}
     made = {"config": config, "seed": seed, "trunk": None if trunk is None else trunk.sha256, "model": fingerprint}
     return hashlib.sha256(json.dumps(made, sort_keys=True).encode()).hexdigest()
 
 
 def finished_run(rt: Runtime, ledger: Path, key: str) -> int | None:
-    """The run the workspace's ``ledger`` (TRAINED) holds for ``key`` when it succeeded and its best
-    checkpoint is there; None: the network is still to train."""
+    """The run the workspace's ``ledger`` (TRAINED) holds for ``key`` when it succeeded with its best
+    checkpoint, or is still queued (a benchmark stopped before it ran: this one runs it); None: the
+    network is still to train (never launched, or its run failed or was cut off while running)."""
     runs = json.loads(ledger.read_text()) if ledger.is_file() else {}
     run_id = runs.get(key)
     if run_id is None:
         return None
     with rt.sessions() as s:
         run = s.get(TrainingRun, run_id)
-        done = run is not None and run.state == RunState.succeeded
-    return run_id if done and trained_checkpoint_path(rt, run_id).is_file() else None
+        state = None if run is None else run.state
+    if state == RunState.queued or (state == RunState.succeeded and trained_checkpoint_path(rt, run_id).is_file()):
+        return run_id
+    return None
 
 
 def record_run(ledger: Path, key: str, run_id: int) -> None:
