@@ -369,3 +369,12 @@ def test_cli_fusion_passes_the_mono_family(tmp_path: Path, monkeypatch: pytest.M
     assert CliRunner().invoke(main, ["bench", "fusion", "--mono", "ideal"]).exit_code == 2
     seeds = fusion.CORRUPTION_SEEDS
     assert f"seeds {seeds[0]}-{seeds[-1]}" in CliRunner().invoke(main, ["bench", "fusion", "--help"]).output
+
+
+def test_the_committed_trunk_is_the_one_its_record_describes() -> None:
+    """docs/bench/trunk: the trunk the README's protocol-2 figures start from, with its recipe."""
+    committed = Path(__file__).parents[1] / "docs" / "bench" / "trunk" / "trunk.safetensors"
+    trunk = load_trunk(committed)
+    assert trunk.recipe["command"].startswith("illusion-studio bench pretrain")
+    assert set(trunk.recipe["data"]["seeds"]).isdisjoint(pretrain.benchmark_seeds())
+    assert {name.split(".")[0] for name in trunk.state} == {"mono", "stereo_branch"}
