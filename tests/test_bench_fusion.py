@@ -254,19 +254,19 @@ def test_a_trained_network_is_reused_only_when_everything_that_makes_it_is_equal
     from webapp.cli.workspace import init_workspace
     from webapp.runtime import Runtime
 
-    config = fusion.network_overrides(fusion.FUSION, 20, {"model.fusion_gate": "true"})
+    config = fusion.network_overrides(fusion.FUSION, 20, {"model.fusion_gate": "false"})
     key = fusion.network_key(config, 7, None, "code")
-    assert key == fusion.network_key({**config, "model.fusion_gate": True}, 7, None, "code")
+    assert key == fusion.network_key({**config, "model.fusion_gate": False}, 7, None, "code")
     others = [fusion.network_key(fusion.network_overrides(fusion.FUSION, 20), 7, None, "code"),
               fusion.network_key(config, 8, None, "code"), fusion.network_key(config, 7, None, "other code"),
               fusion.network_key(fusion.network_overrides(fusion.ABLATIONS[0], 20, {"model.use_vlm": True}), 7, None, "code")]
     assert len({key, *others}) == 5
     stereo_only = [fusion.network_key(fusion.network_overrides(fusion.ABLATIONS[1], 20, design), 7, None, "code")
-                   for design in ({}, {"model.fusion_gate": True, "train.confidence_loss": "ce", "model.flow_noise": False})]
+                   for design in ({}, {"model.fusion_gate": False, "train.confidence_loss": "focal", "model.flow_noise": True})]
     assert stereo_only[0] == stereo_only[1]  # the fusion-only fields do not make a stereo-only network
     no_vlm = [fusion.network_key(fusion.network_overrides(fusion.ABLATIONS[0], 20, design), 7, None, "code")
-              for design in ({}, {"model.flow_noise": False, "model.vlm_eye": "efficientnet-lite0"},
-                             {"model.fusion_gate": True})]
+              for design in ({}, {"model.flow_noise": True, "model.vlm_eye": "patches"},
+                             {"model.fusion_gate": False})]
     assert no_vlm[0] == no_vlm[1] != no_vlm[2]  # nor the VLM's a no-VLM one; its fusion's do
     assert fusion.network_key(fusion.network_overrides(fusion.ABLATIONS[1], 20, {"model.token_downsample": 4}),
                               7, None, "code") != stereo_only[0]  # the token grid sets its size multiple

@@ -22,7 +22,9 @@ from model.stereo.upsample import convex_upsample  # noqa: E402
 from tests.model_pairs import random_dot_pair  # noqa: E402
 
 SMALL = {"hidden_dims": [16, 16, 16], "motion_dim": 16, "feature_dim": 32, "vlm_dim": 32, "flow_dim": 32,
-         "confidence_dim": 16, "fusion_dim": 16}
+         "confidence_dim": 16, "fusion_dim": 16, "vlm_eye_weights": "random"}
+# The paper's design where a test is about it (lite turns on the gate, cross-entropy and a deterministic flow).
+PAPER_DESIGN = {"fusion_gate": False, "confidence_loss": "focal", "flow_noise": True}
 
 
 def _tensors(height: int = 64, width: int = 128, d: float = 4.0, seed: int = 0):
@@ -110,7 +112,7 @@ def test_the_confidence_target_trusts_the_stereo_where_it_is_closer_than_the_mon
                                                                                  expected: list[float]) -> None:
     """Three 2×2 blocks (one confidence pixel each): the stereo misses by 1, 2, 2 px, the aligned mono
     by 3, 3, 1 px. The authors' threshold trusts the first block alone; "closer" the first two."""
-    cfg = load_preset("lite", {"confidence_target": target}).train
+    cfg = load_preset("lite", {**PAPER_DESIGN, "confidence_target": target}).train
     gt = torch.full((1, 1, 2, 6), 10.0)
     stereo = gt + torch.tensor([1.0, 1.0, 2.0, 2.0, 2.0, 2.0])
     aligned = gt - torch.tensor([3.0, 3.0, 3.0, 3.0, 1.0, 1.0])
@@ -127,7 +129,7 @@ def test_the_confidence_target_trusts_the_stereo_where_it_is_closer_than_the_mon
 
 
 def test_the_loss_equals_a_hand_computation() -> None:
-    cfg = load_preset("lite").train
+    cfg = load_preset("lite", PAPER_DESIGN).train
     gt = torch.tensor([[[[1.0, 2.0, 800.0, 4.0]] * 2]])  # 1×1×2×4; 800 > max_disparity: ignored
     valid = torch.ones_like(gt, dtype=torch.bool)
     valid[0, 0, 1, 3] = False
@@ -204,7 +206,8 @@ def test_the_cross_entropy_confidence_loss_is_the_weighted_bce() -> None:
     pushes = []
     for loss in ("ce", "focal"):
         logit = logits[..., :1].clone().requires_grad_(True)
-        confidence_terms(logit, torch.ones_like(logit), load_preset("lite", {"confidence_loss": loss}).train).sum().backward()
+        cfg = load_preset("lite", {"confidence_loss": loss, "ce_weight": 1.0}).train
+        confidence_terms(logit, torch.ones_like(logit), cfg).sum().backward()
         pushes.append(float(logit.grad))
     assert 50 < pushes[0] / pushes[1] < 60
     with pytest.raises(ValueError, match="train.ce_weight"):
@@ -220,7 +223,7 @@ def test_a_deterministic_flow_ignores_the_noise() -> None:
         first, second = (network(left, right, mono, iters=2, noise=torch.Generator().manual_seed(seed)).confidence
                          for seed in (1, 2))
     assert torch.equal(first, second)
-    noisy = FusionNetwork(load_preset("lite", SMALL).model).eval()
+    noisy = FusionNetwork(load_preset("lite", {**SMALL, "flow_noise": True}).model).eval()
     noisy.load_trainable_state_dict(network.trainable_state_dict())
     with torch.no_grad():
         first, second = (noisy(left, right, mono, iters=2, noise=torch.Generator().manual_seed(seed)).confidence
@@ -248,7 +251,7 @@ def test_gradients_reach_every_trainable_parameter(overrides: dict) -> None:
 
 
 def test_the_same_seed_gives_the_same_output() -> None:
-    config = load_preset("lite", SMALL)
+    config = load_preset("lite", {**SMALL, "flow_noise": True})
     torch.manual_seed(0)
     network = FusionNetwork(config.model).eval()
     left, right, mono, _ = _tensors()

@@ -108,7 +108,7 @@ def test_the_eye_vlm_builds_and_forwards(weights: str) -> None:
 
 def test_the_eye_keeps_sides_at_the_networks_multiple_without_the_patch_side() -> None:
     assert load_preset("lite", {**SMALL, "vlm_eye_weights": "random", "vlm_patch": 64}).model.size_multiple == 32
-    assert load_preset("lite", {"vlm_patch": 64}).model.size_multiple == 64
+    assert load_preset("lite", {"vlm_eye": "patches", "vlm_patch": 64}).model.size_multiple == 64
 
 
 def test_the_backbone_gets_no_gradient_and_checkpoints_refuse_another_eye(tmp_path: Path) -> None:
@@ -184,7 +184,7 @@ def test_the_memory_estimate_counts_the_eyes_weights() -> None:
     size_mb = package_weights_file().stat().st_size / 2**20
     assert frozen_weights_mb(load_preset("lite", {"vlm_eye": "efficientnet-lite0"})) == pytest.approx(size_mb)
     assert frozen_weights_mb(load_preset("lite", {"vlm_eye": "efficientnet-lite0", "vlm_eye_weights": "random"})) == 0
-    assert frozen_weights_mb(load_preset("lite")) == 0
+    assert frozen_weights_mb(load_preset("lite", {"vlm_eye": "patches"})) == 0
 
 
 def test_the_eyes_tokens_sit_where_the_flows_tokens_do() -> None:
