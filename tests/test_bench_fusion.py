@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from sqlalchemy import select
 
 torch = pytest.importorskip("torch")
 
@@ -149,7 +150,7 @@ def test_report_carries_every_method_the_paired_record_and_the_timings(tmp_path:
     monkeypatch.setattr(fusion, "training_disparity_range", lambda _rt: [3.0, 44.0])
     monkeypatch.setattr(fusion, "training_seeds", lambda _rt, count: [0, 7][:count])
     monkeypatch.setattr(fusion, "launch_run", from_init)
-    monkeypatch.setattr(fusion, "run_jobs", lambda _rt, workers: drained.append(workers))
+    monkeypatch.setattr(fusion, "run_jobs", lambda _rt, workers, runs: drained.append(workers))
     monkeypatch.setattr(fusion, "trained_checkpoint", lambda _rt, run_id: (checkpoints[run_id], 0.5 * run_id))
     monkeypatch.setattr(fusion, "held_out_samples", one_frame)
     report = fusion.run_fusion_bench(tmp_path, seeds=2, steps=20, ablations=True, split="val", workers=2,
@@ -295,4 +296,36 @@ def test_a_trained_network_is_reused_only_when_everything_that_makes_it_is_equal
     best.write_bytes(b"weights")
     assert fusion.finished_run(rt, ledger, key) == run_id
     assert fusion.finished_run(rt, ledger, others[1]) is None and fusion.finished_run(rt, ledger, others[0]) is None
+    rt.close()
+
+
+def test_a_benchmark_runs_only_the_jobs_of_the_runs_it_launched(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two benchmarks on one work dir share its queue: each drains only its own runs' jobs."""
+    from dataset.db import transaction
+    from dataset.models import Job, JobState, RunState, TrainingRun
+    from dataset.services import jobs as job_service
+    from webapp.cli.workspace import init_workspace
+    from webapp.runtime import Runtime
+
+    rt = Runtime(init_workspace(tmp_path / "ws"))
+    with transaction(rt.sessions) as s:
+        jobs = [Job(kind="noop", params={}) for _ in range(3)]
+        s.add_all(jobs)
+        s.flush()
+        runs = [TrainingRun(preset="lite", config={}, dataset_id="ab" * 32, dataset={}, state=RunState.queued,
+                            job_id=job.id) for job in jobs]
+        s.add_all(runs)
+        s.flush()
+        job_ids, run_ids = [job.id for job in jobs], [run.id for run in runs]
+    ran: list[int] = []
+    handlers = {"noop": lambda ctx: ran.append(ctx.job_id) or {}}
+    assert job_service.run_queued_jobs(handlers, rt, only={job_ids[1]}) == [(job_ids[1], JobState.succeeded)]
+    with rt.sessions() as s:
+        run_ids_of = {job_id: s.scalar(select(TrainingRun.id).where(TrainingRun.job_id == job_id)) for job_id in job_ids}
+    assert run_ids_of[job_ids[1]] == run_ids[1]
+    monkeypatch.setattr(fusion, "HANDLERS", handlers)  # the real queue and claim, a trivial job's work
+    fusion.run_jobs(rt, 2, [run_ids[2]])
+    assert ran == [job_ids[1], job_ids[2]]
+    with rt.sessions() as s:
+        assert s.get(Job, job_ids[0]).state == JobState.queued  # another benchmark's: left alone
     rt.close()

@@ -53,7 +53,7 @@ def test_held_out_pairs_are_bit_identical_whatever_the_training_workspace_holds(
     monkeypatch.setattr(fusion, "training_seeds", lambda _rt, count: list(range(count)))
     monkeypatch.setattr(fusion, "launch_run", lambda *_a, **_k: 1)
     monkeypatch.setattr(fusion, "finished_run", lambda *_a: None)  # both workspaces train their own
-    monkeypatch.setattr(fusion, "run_jobs", lambda _rt, workers: None)
+    monkeypatch.setattr(fusion, "run_jobs", lambda _rt, workers, runs: None)
     monkeypatch.setattr(fusion, "_score", recording)
     monkeypatch.setattr(fusion, "_seed_scores", _trained)
     reports = []
@@ -127,7 +127,7 @@ def test_scoring_the_warp_pairs_after_val_trains_nothing(tmp_path: Path, monkeyp
     # the ledger's runs all succeeded (no database here)
     monkeypatch.setattr(fusion, "finished_run", lambda _rt, ledger, key: json.loads(ledger.read_text()).get(key)
                         if ledger.is_file() else None)
-    monkeypatch.setattr(fusion, "run_jobs", lambda _rt, workers: None)
+    monkeypatch.setattr(fusion, "run_jobs", lambda _rt, workers, runs: None)
     monkeypatch.setattr(fusion, "_seed_scores", _trained)
     val, warp = (fusion.run_fusion_bench(tmp_path, seeds=2, steps=5, **kw) for kw in ({"split": "val"}, {"mono": "warp"}))
     assert launched == [0, 1] and val["reused_runs"] == [] and warp["reused_runs"] == [1, 2]

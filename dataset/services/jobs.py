@@ -10,7 +10,7 @@ import os
 import socket
 import time
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from datetime import timedelta
@@ -262,9 +262,11 @@ def _finish(sessions: sessionmaker[Session], job_id: int, me: str, **values: Any
         return s.get(Job, job_id).state
 
 
-def run_queued_jobs(handlers: dict[str, Handler], env: JobEnv, *, workers: int = 1) -> list[tuple[int, JobState]]:
-    """Run every queued job in this process, oldest first, including jobs they queue; then return
-    each job it took with its final state, in the order taken.
+def run_queued_jobs(handlers: dict[str, Handler], env: JobEnv, *, workers: int = 1,
+                    only: Collection[int] | None = None) -> list[tuple[int, JobState]]:
+    """Run every queued job in this process, oldest first, including jobs they queue — or, with
+    ``only``, just those of these ids still queued (what one caller launched, when another process
+    drains the same database) —; then return each job it took with its final state, in the order taken.
 
     ``workers`` threads take jobs at once (a training job's work runs in processes of its own, so
     two threads train two runs side by side). The database is the source of truth, so this works
@@ -274,8 +276,11 @@ def run_queued_jobs(handlers: dict[str, Handler], env: JobEnv, *, workers: int =
 
     def drain() -> None:
         while True:
+            query = select(Job.id).where(Job.state == JobState.queued)
+            if only is not None:
+                query = query.where(Job.id.in_(list(only)))
             with env.sessions() as s:
-                job_id = s.scalar(select(Job.id).where(Job.state == JobState.queued).order_by(Job.id).limit(1))
+                job_id = s.scalar(query.order_by(Job.id).limit(1))
             if job_id is None:
                 return
             execute_job(job_id, handlers, env)

@@ -172,7 +172,7 @@ def run_fusion_bench(work_dir: Path, *, seeds: int = 1, steps: int = DEFAULT_STE
                 reused.append(run_id)
             launched[k, network.name] = run_id
     timed = time.perf_counter()
-    run_jobs(rt, workers)
+    run_jobs(rt, workers, launched.values())
     train_wall_s = time.perf_counter() - timed
     runs = [_seed_scores(rt, k, pairs, networks, launched) for k in range(seeds)]
     rt.close()
@@ -436,9 +436,14 @@ def import_captures(rt: Runtime, seeds: Iterable[int], frames: int) -> dict[str,
     return condition_ranges(values)
 
 
-def run_jobs(rt: Runtime, workers: int = 1) -> None:
-    """Every queued job of the workspace, ``workers`` at a time; RuntimeError naming those that failed."""
-    ran = job_service.run_queued_jobs(HANDLERS, rt, workers=workers)
+def run_jobs(rt: Runtime, workers: int = 1, runs: Iterable[int] | None = None) -> None:
+    """The queued jobs of the workspace — with ``runs``, only those training runs' (another benchmark
+    on the same work dir keeps its own) — ``workers`` at a time; RuntimeError naming those that failed."""
+    only = None
+    if runs is not None:
+        with rt.sessions() as s:
+            only = set(s.scalars(select(TrainingRun.job_id).where(TrainingRun.id.in_(list(runs)))))
+    ran = job_service.run_queued_jobs(HANDLERS, rt, workers=workers, only=only)
     failed = [job_id for job_id, state in ran if state != JobState.succeeded]
     if failed:
         raise RuntimeError(f"benchmark: jobs {failed} did not succeed (`illusion-studio jobs show ID`)")

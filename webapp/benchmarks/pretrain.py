@@ -71,7 +71,7 @@ def run_pretrain(work_dir: Path, *, videos: int = PRETRAIN_VIDEOS, frames: int =
     prepare_s = time.perf_counter() - started
     try:
         run_id = fusion.launch_run(rt, PRETRAIN_SEED, pretrain_overrides(steps), split=PRETRAIN_SPLIT)
-        fusion.run_jobs(rt)
+        fusion.run_jobs(rt, runs=[run_id])
         checkpoint, train_s = fusion.trained_checkpoint(rt, run_id)
         with rt.sessions() as s:
             best_step = s.get(TrainingRun, run_id).best_step
