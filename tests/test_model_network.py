@@ -214,20 +214,22 @@ def test_the_cross_entropy_confidence_loss_is_the_weighted_bce() -> None:
         load_preset("lite", {"ce_weight": -1})
 
 
+def _seeded_outputs(network: FusionNetwork, seeds: tuple[int, ...]) -> list[FusionOutput]:
+    """The network's eval outputs on the test pair, one per flow-noise seed."""
+    left, right, mono, _ = _tensors()
+    with torch.no_grad():
+        return [network(left, right, mono, iters=2, noise=torch.Generator().manual_seed(s)) for s in seeds]
+
+
 def test_a_deterministic_flow_ignores_the_noise() -> None:
     config = load_preset("lite", {**SMALL, "flow_noise": False})
     torch.manual_seed(0)
     network = FusionNetwork(config.model).eval()
-    left, right, mono, _ = _tensors()
-    with torch.no_grad():
-        first, second = (network(left, right, mono, iters=2, noise=torch.Generator().manual_seed(seed)).confidence
-                         for seed in (1, 2))
+    first, second = (out.confidence for out in _seeded_outputs(network, (1, 2)))
     assert torch.equal(first, second)
     noisy = FusionNetwork(load_preset("lite", {**SMALL, "flow_noise": True}).model).eval()
     noisy.load_trainable_state_dict(network.trainable_state_dict())
-    with torch.no_grad():
-        first, second = (noisy(left, right, mono, iters=2, noise=torch.Generator().manual_seed(seed)).confidence
-                         for seed in (1, 2))
+    first, second = (out.confidence for out in _seeded_outputs(noisy, (1, 2)))
     assert not torch.equal(first, second)
 
 
@@ -255,8 +257,7 @@ def test_the_same_seed_gives_the_same_output() -> None:
     torch.manual_seed(0)
     network = FusionNetwork(config.model).eval()
     left, right, mono, _ = _tensors()
-    with torch.no_grad():
-        runs = [network(left, right, mono, iters=2, noise=torch.Generator().manual_seed(s)) for s in (5, 5, 6)]
+    runs = _seeded_outputs(network, (5, 5, 6))
     assert torch.equal(runs[0].confidence, runs[1].confidence) and torch.equal(runs[0].disparity, runs[1].disparity)
     assert not torch.equal(runs[0].confidence, runs[2].confidence)
     batch = torch.cat([left, left]), torch.cat([right, right]), torch.cat([mono, mono])
