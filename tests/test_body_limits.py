@@ -105,7 +105,7 @@ def multipart(token: str | None) -> dict[str, str]:
 def test_a_300_mb_body_is_answered_from_its_first_64_kb_and_never_read(served, path, role, chunks, status) -> None:  # type: ignore[no-untyped-def]
     port, tokens = served
     headers = multipart(tokens.get(role or ""))
-    send_big(port, path, 4 * KB64, headers, chunks=chunks)  # the first answer imports and caches what answering takes
+    send_big(port, path, 300 * MB, headers, chunks=chunks)  # the first answer imports and caches what answering takes
     process = psutil.Process()
     before = process.memory_info().rss
     got, answer, sent = send_big(port, path, 300 * MB, headers, chunks=chunks)

@@ -1,15 +1,16 @@
 """How large a request body each route takes, checked before anything reads one.
 
-The server (:mod:`webapp.server`) hands the app a body as it streams in. The hook here runs before
-the rate limits, authentication and the CSRF check: a declared length over the route's limit is
-answered 413 at once, and a chunked body is refused at the first byte past the limit. Then
-:mod:`webapp.auth` answers an anonymous client 401, and a role too low 403, before anything reads
-the body, so only a curator's upload makes the server take in a large one.
+The server (:mod:`webapp.server`) reads a body ahead before a worker takes the request: up to 32 KiB
+for anyone, up to the limit here for a client whose credentials the route serves
+(:mod:`webapp.admission`). The hook here runs before the rate limits, authentication and the CSRF
+check: a declared length over the route's limit is answered 413 at once, and a chunked body is
+refused at the first byte past the limit. Then :mod:`webapp.auth` answers an anonymous client 401,
+and a role too low 403, before anything reads the body.
 """
 
 from __future__ import annotations
 
-from typing import IO
+from typing import IO, Any
 
 from flask import Flask, abort, current_app, request
 from werkzeug.exceptions import RequestEntityTooLarge
@@ -18,7 +19,7 @@ from werkzeug.wsgi import LimitedStream
 from dataset.services.annotate import MAX_CLICKS, MAX_REGIONS
 from dataset.settings import Settings
 from webapp.auth import PUBLIC, ROLE_ATTR
-from webapp.server import READ_AHEAD_BYTES
+from webapp.server import READ_AHEAD_BYTES, BodyCut
 
 MIB = 1 << 20
 # Forms and JSON: a segment call's previous mask or a propagated mask is one mask (a SAM2 mask's RLE
@@ -80,6 +81,12 @@ class CappedStream(LimitedStream):
 
 def init_body_limits(app: Flask, settings: Settings) -> None:
     """Give every request its route's body limit; register before any hook that may read a body."""
+
+    @app.errorhandler(BodyCut)
+    def _cut(_: BodyCut) -> Any:
+        limit = body_limit(current_app, request.endpoint, settings)
+        return app.handle_http_exception(RequestEntityTooLarge(
+            f"{request.method} {request.path} takes at most {size_text(limit)} of body"))
 
     @app.before_request
     def _limit_body() -> None:

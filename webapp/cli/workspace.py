@@ -64,13 +64,16 @@ def _serve(state: CliState, host: str | None, port: int | None, threads: int) ->
 def make_server(settings: Settings, rt: Runtime, host: str | None, port: int | None, threads: int) -> Server:
     """The app's server, listening on ``host:port`` (default: the settings'; port 0: any free one);
     connections wait in the backlog until ``run()``; ``close()`` stops it."""
+    from webapp.admission import make_admission
     from webapp.app import create_app
     from webapp.server import Server
     from webapp.throttle import size_for_server
 
     logging.basicConfig()  # the app's modules report through logging
     size_for_server(threads)  # slowed logins may hold at most half of these threads
-    return Server(create_app(settings, rt), host or settings.host, settings.port if port is None else port, threads)
+    app = create_app(settings, rt)
+    return Server(app, host or settings.host, settings.port if port is None else port, threads,
+                  admit=make_admission(app, settings, rt))
 
 
 def server_url(server: Server) -> str:
