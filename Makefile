@@ -9,17 +9,28 @@ CONSTRAINTS := constraints.txt
 PIP_ARGS ?=
 PIP = $(BIN)/pip install --quiet --disable-pip-version-check -c $(CONSTRAINTS) $(PIP_ARGS)
 PYTEST_ARGS ?=
+# The suite runs in two parts: everything independent across TEST_WORKERS processes (pytest-xdist, a
+# module's tests kept together so its fixtures are built once), then the tests marked `serial`, which
+# measure time or memory under load, alone. pytest's "no tests" (exit 5) fails the first part; the
+# second may find none when PYTEST_ARGS names a file without them.
+TEST_WORKERS ?= 2
+PYTEST = $(BIN)/python -m pytest
 # torch moves only when this is changed on purpose (`make lock TORCH=torch==2.14.1`).
 TORCH ?= torch==$(shell sed -n 's/^torch==//p' $(CONSTRAINTS))
 
-.PHONY: demo test lint venv venv-test bench lock clean
+.PHONY: demo test test-fast lint venv venv-test bench lock clean
 
 demo: $(VENV)/.installed
 	$(BIN)/illusion-studio demo
 
 test: $(VENV)/.installed-test
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest $(PYTEST_ARGS)
+	$(PYTEST) -n $(TEST_WORKERS) --dist loadfile -m "not serial" $(PYTEST_ARGS)
+	$(PYTEST) -p no:xdist -m serial $(PYTEST_ARGS) || [ $$? -eq 5 ]
+
+# The quick loop while coding: no browser, nothing slow, nothing that measures.
+test-fast: $(VENV)/.installed-test
+	$(PYTEST) -n $(TEST_WORKERS) --dist loadfile -m "not slow and not browser and not serial" $(PYTEST_ARGS)
 
 lint: $(VENV)/.installed-test
 	$(BIN)/ruff check .

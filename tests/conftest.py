@@ -3,6 +3,7 @@ an app with one user per role, and their API tokens."""
 
 from __future__ import annotations
 
+import functools
 import os
 import re
 import uuid
@@ -10,6 +11,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from werkzeug import security
 
 from dataset.db import make_engine, make_session_factory, migrate, scratch_database, transaction
 from dataset.models import Role
@@ -20,6 +22,26 @@ from webapp.runtime import Runtime
 TEST_DATABASE_URL = os.environ.get("TEST_DATABASE_URL", "")
 TEST_REDIS_URL = os.environ.get("TEST_REDIS_URL", "")
 PASSWORD = "correct-horse-battery"
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """One thread per test process, set before any test module imports torch: on 2 cores torch's own
+    default oversubscribes them (with two xdist workers, each spinning a thread per core), and the
+    model tests run ~10x slower."""
+    for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ.setdefault(name, "1")
+
+
+# The real hash (scrypt) costs 0.09 s of CPU a password; hundreds of tests create users. Tests of the
+# hashing itself are marked `password_hashing` and get the real one.
+FAST_PASSWORD_HASH = functools.partial(security.generate_password_hash, method="pbkdf2:sha256:1")
+user_service.generate_password_hash = FAST_PASSWORD_HASH  # type: ignore[assignment]
+
+
+@pytest.fixture(autouse=True)
+def _password_hash(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> None:
+    if request.node.get_closest_marker("password_hashing"):
+        monkeypatch.setattr(user_service, "generate_password_hash", security.generate_password_hash)
 
 
 @pytest.fixture(autouse=True)

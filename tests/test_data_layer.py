@@ -47,6 +47,16 @@ def test_migrations_match_the_models(db_url: str) -> None:
     engine.dispose()
 
 
+@pytest.mark.password_hashing
+def test_passwords_are_stored_as_scrypt_hashes(sessions) -> None:  # type: ignore[no-untyped-def]
+    with transaction(sessions) as s:
+        user_service.create_user(s, "ana", "curator", "long-enough")
+    with transaction(sessions) as s:
+        assert s.scalar(select(User.password_hash).where(User.name == "ana")).startswith("scrypt:")
+        assert user_service.authenticate(s, "ana", "long-enough") is not None
+        assert user_service.authenticate(s, "ana", "long-enougH") is None
+
+
 def test_users_roles_and_tokens(sessions) -> None:  # type: ignore[no-untyped-def]
     with transaction(sessions) as s:
         user = user_service.create_user(s, "ana", "curator", "long-enough")
