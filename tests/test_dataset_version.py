@@ -103,8 +103,9 @@ def test_version_reader_reads_the_pinned_files(source: Runtime) -> None:
         illusion = np.logical_or.reduce([m for n, m in arrays["masks"].items() if n.startswith("illusion")]) & valid
         assert np.array_equal(sample.regions["illusion"], illusion)
         assert np.array_equal(sample.regions["non_illusion"], valid & ~illusion)
-        for kind in item["illusion_types"]:
-            assert np.array_equal(sample.regions[kind], illusion)
+        for kind in item["illusion_types"]:  # each type's region: the masks of the pairs of that type
+            typed = [m for n, m in arrays["masks"].items() if n.startswith("illusion") and item["pair_types"][n] == kind]
+            assert np.array_equal(sample.regions[kind], np.logical_or.reduce(typed) & valid)
         if item["kind"] == "synthesized":
             assert np.array_equal(sample.mono, arrays["disparity_mono"])
         assert sample.meta["sample_id"] == item["sample_id"] and sample.meta["kind"] == item["kind"]

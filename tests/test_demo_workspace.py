@@ -32,6 +32,27 @@ def test_the_demo_takes_its_workspace_from_the_environment_too(tmp_path: Path) -
     # the logins come last, framed
     tail = result.stdout.strip().splitlines()[-8:]
     assert tail[-1].startswith("└") and any("admin-demo" in line for line in tail)
+    _mirrors_are_mirrors(home, tmp_path)
+
+
+def _mirrors_are_mirrors(home: Path, tmp_path: Path) -> None:
+    """The demo's ready-made samples type each pair as its scene says (a picture and a mirror), so a
+    mirror reaches the COCO file, the authors' layout and an evaluation report."""
+    env = {"ILLUSION_STUDIO_HOME": str(home)}
+    assert cli("worker", "--burst", env=env).returncode == 0  # generates the annotated frames (no training)
+    for layout in ("native", "authors"):
+        done = cli("export", str(tmp_path / layout), "--format", layout, "--state", "generated", "--state", "accepted",
+                   "--here", env=env)
+        assert done.returncode == 0, done.stderr
+    coco = [json.loads(f.read_text()) for f in (tmp_path / "native" / "annotations").glob("*.json")]
+    categories = {c["name"]: c["id"] for split in coco for c in split["categories"]}
+    used = {a["category_id"] for split in coco for a in split["annotations"]}
+    assert categories.get("mirror/illusion") in used and categories.get("picture/illusion") in used, categories
+    assert any((tmp_path / "authors").rglob("*mirror*")), "the authors' layout has no mirror"
+    report = cli("evaluate", "--data", str(tmp_path / "native"), "--format", "native", "--method", "sgbm",
+                 "--out", str(tmp_path / "report"), "--here", "--json", env=env)
+    assert report.returncode == 0, report.stderr
+    assert "mirror" in json.dumps(json.loads(report.stdout))
 
 
 def test_the_demo_refuses_a_workspace_it_did_not_create(tmp_path: Path) -> None:

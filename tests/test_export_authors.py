@@ -42,12 +42,12 @@ def test_export_writes_the_authors_layout(source: Runtime, tmp_path: Path) -> No
     lines = (out / "meta_data" / "scale_factors.csv").read_text().splitlines()
     assert len(lines) == 5 and lines == sorted(lines)
     right, scale = lines[0].rsplit(",", 1)
-    assert right == "video_frame_sequence_right/synthetic-0000/picture/frame_0000.png" and float(scale) > 0
+    assert right == "video_frame_sequence_right/synthetic-0000/mirror+picture/frame_0000.png" and float(scale) > 0
     for part in ("video_frame_sequence", "video_frame_sequence_right", "depth_rect"):
         assert (out / right.replace("video_frame_sequence_right", part)).is_file()
-    depth = cv2.imread(str(out / "depth_rect/synthetic-0000/picture/frame_0000.png"), cv2.IMREAD_UNCHANGED)
+    depth = cv2.imread(str(out / "depth_rect/synthetic-0000/mirror+picture/frame_0000.png"), cv2.IMREAD_UNCHANGED)
     assert depth.dtype == np.uint16 and depth.ndim == 2 and depth.max() > 0
-    masks = sorted(p.name for p in (out / "sam_mask/synthetic-0000/picture").glob("frame_0000-*"))
+    masks = sorted(p.name for p in (out / "sam_mask/synthetic-0000/mirror+picture").glob("frame_0000-*"))
     assert masks == ["frame_0000-00-00-illusion.png", "frame_0000-00-00-nonillusion.png",
                      "frame_0000-01-00-illusion.png", "frame_0000-01-00-nonillusion.png"]
     with (out / "meta_data" / "testing_enter.pkl").open("rb") as fh:
@@ -73,7 +73,7 @@ def test_round_trip_keeps_disparity_within_the_uint16_step(source: Runtime, fres
             continue
         capture = sample.provenance["source"] == "capture"
         # names: <scene>_<obj> for the capture; <video folder>/<illusion type> for training data
-        new_sample, new = after["lab_scene_tv_00" if capture else f"{video}/picture", index]
+        new_sample, new = after["lab_scene_tv_00" if capture else f"{video}/mirror+picture", index]
         assert np.array_equal(new["left"], old["left"]) and np.array_equal(new["right"], old["right"])
         if capture:
             # PFM is exact; the test mask is illusion ∧ valid, and only pair 0's illusion survives
@@ -107,7 +107,7 @@ def test_jpeg_masks_are_written_and_read(source: Runtime, fresh: Runtime, tmp_pa
     assert {p.suffix for p in (out / "sam_mask").rglob("*.*")} == {".jpg"}
     assert import_(fresh, out, "authors").result["added"] == 6
     old = {k[1]: v for k, v in samples_by_name(source).items() if k[0] == "synthetic-0001"}
-    new = {k[1]: v for k, v in samples_by_name(fresh).items() if k[0] == "synthetic-0001/picture"}
+    new = {k[1]: v for k, v in samples_by_name(fresh).items() if k[0] == "synthetic-0001/mirror+picture"}
     for index, (_, outputs) in new.items():
         for name, mask in outputs["masks"].items():
             assert (mask != old[index][1]["masks"][name]).mean() < 0.001  # JPEG at quality 100, thresholded at 128

@@ -195,7 +195,8 @@ def test_layout_manifest_and_coco(source: Runtime, tmp_path: Path) -> None:
             kind, pair = ann["attributes"]["kind"], ann["attributes"]["pair"]
             png = out / Path(image["file_name"]).parent / "masks" / f"{kind}_{pair:02d}.png"
             assert np.array_equal(coco.annToMask(ann).astype(bool), read_mask(png))
-            expected = "unspecified" if image["sample"] == capture["id"] else "picture"
+            types = next(s["provenance"].get("pair_types", {}) for s in manifest["samples"] if s["id"] == image["sample"])
+            expected = "unspecified" if image["sample"] == capture["id"] else types[f"illusion_{pair:02d}"]
             assert coco.loadCats(ann["category_id"])[0]["name"] == f"{expected}/{kind}"
 
 

@@ -13,7 +13,7 @@ from dataset.db import transaction
 from dataset.models import Annotation, Frame, FrameState, Job, Sample, User
 from dataset.samples import load_outputs
 from dataset.services import jobs as job_service
-from dataset.services.demo import _true_regions
+from dataset.services.demo import true_regions
 from dataset.services.ingest import ingest_params
 from dataset.synthetic import read_video, write_synthetic_dataset
 from tests.workers import extra_settings, queue_settings, rt, start_worker, wait_for  # noqa: F401  (fixtures)
@@ -40,7 +40,7 @@ def prepare(runtime: Runtime, tmp_path: Path, n_frames: int = 2, annotate: bool 
 
             user = s.scalar(select(User)) or _user(s)
             for frame in s.scalars(select(Frame).order_by(Frame.index)):
-                save_annotation(s, frame.id, user, version=0, regions=_true_regions(runtime.media, frame),
+                save_annotation(s, frame.id, user, version=0, regions=true_regions(runtime.media, frame, frame.video),
                                 illusion_type="picture", submit=True)
     return scene
 
@@ -138,7 +138,8 @@ def test_submit_queues_generation_and_curators_review_samples(client, tokens, ru
     curator = {"Authorization": f"Bearer {tokens['curator']}"}
     frame_id = client.post("/api/v1/queue/annotate/next", headers=annotator).json["frame_id"]
     with runtime.sessions() as s:
-        regions = _true_regions(runtime.media, s.get(Frame, frame_id))
+        frame = s.get(Frame, frame_id)
+        regions = true_regions(runtime.media, frame, frame.video)
     done = client.post(f"/api/v1/frames/{frame_id}/annotation", headers=annotator,
                        json={"version": 0, "regions": regions, "illusion_type": "mirror"})
     assert done.status_code == 200

@@ -18,7 +18,7 @@ from dataset.readers import open_reader
 from dataset.readers.version import VersionReader, pin_dataset_version
 from dataset.samples import load_output
 from dataset.services.annotate import save_annotation
-from dataset.services.demo import _true_regions
+from dataset.services.demo import true_regions
 from dataset.services.errors import InvalidInput
 from tests.test_generate import _user, generate_all, prepare
 from webapp.benchmarks.scale import seed
@@ -29,7 +29,7 @@ def _annotate(runtime: Runtime, types: dict[int, str]) -> None:
     with transaction(runtime.sessions) as s:
         user = s.scalar(select(User)) or _user(s)
         for frame in s.scalars(select(Frame).order_by(Frame.index)):
-            regions = [{**r, "illusion_type": types.get(r["pair"])} for r in _true_regions(runtime.media, frame)]
+            regions = [{**r, "illusion_type": types.get(r["pair"])} for r in true_regions(runtime.media, frame, frame.video)]
             save_annotation(s, frame.id, user, version=0, regions=regions, illusion_type="picture", submit=True)
 
 
@@ -67,7 +67,7 @@ def test_a_pair_with_two_types_is_refused(runtime: Runtime, tmp_path: Path) -> N
     with transaction(runtime.sessions) as s:
         user = s.scalar(select(User)) or _user(s)
         frame = s.scalar(select(Frame))
-        regions = _true_regions(runtime.media, frame)
+        regions = true_regions(runtime.media, frame, frame.video)
         regions = [{**r, "illusion_type": "mirror" if r["kind"] == "illusion" else "picture"} for r in regions]
         with pytest.raises(InvalidInput, match="pair 0 has two illusion types"):
             save_annotation(s, frame.id, user, version=0, regions=regions, illusion_type="picture", submit=True)

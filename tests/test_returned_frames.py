@@ -14,7 +14,7 @@ from dataset.db import transaction
 from dataset.models import Annotation, Frame, FrameState, Role, Sample, SampleState
 from dataset.services import users as user_service
 from dataset.services.annotate import frame_detail, save_annotation
-from dataset.services.demo import _true_regions
+from dataset.services.demo import true_regions
 from dataset.services.frames import update_frame
 from dataset.services.leases import next_frame
 from dataset.services.sample_review import review_sample
@@ -26,7 +26,7 @@ REASON = "mask misses the picture's left edge"
 
 def submitted_and_generated(s: Any, media: Any, frame: Frame, user: Any) -> Sample:
     """The annotator submits the frame's true masks; a sample is made of them (as generate would)."""
-    ann = save_annotation(s, frame.id, user, version=0, regions=_true_regions(media, frame),
+    ann = save_annotation(s, frame.id, user, version=0, regions=true_regions(media, frame, frame.video),
                           illusion_type="picture", submit=True)
     update_frame(s, frame, state=FrameState.generated)
     sample = Sample(frame_id=frame.id, annotation_version=ann.version, state=SampleState.generated)

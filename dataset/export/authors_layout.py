@@ -50,12 +50,13 @@ def is_capture(record: SampleRecord) -> bool:
 
 
 def training_names(record: SampleRecord) -> tuple[str, str, str]:
-    """(video, title, frame stem): the names an import recorded, else (video folder, illusion type,
-    ``frame_<index:04d>``)."""
+    """(video, title, frame stem): the names an import recorded, else (video folder, the frame's
+    illusion types joined by ``+`` — ``mirror+picture`` for a frame holding both —, ``frame_<index:04d>``)."""
     names = record.provenance.get("authors", {})
     if {"video", "title", "frame"} <= names.keys():
         return names["video"], names["title"], names["frame"]
-    return record.video_dir, record.illusion_type or "unspecified", f"frame_{record.index:04d}"
+    types = sorted(set((record.provenance.get("pair_types") or {}).values()) or {record.illusion_type or "unspecified"})
+    return record.video_dir, "+".join(types), f"frame_{record.index:04d}"
 
 
 def testing_names(record: SampleRecord) -> tuple[str, str, str]:

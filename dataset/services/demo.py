@@ -37,8 +37,8 @@ def seed_reviews_and_annotations(session: Session, media: MediaStore, curator: U
             if frame.state == FrameState.prefiltered:
                 review_frame(session, frame.id, curator, "approve")
             if n < annotate and frame.state == FrameState.approved:
-                save_annotation(session, frame.id, annotator, version=0, regions=_true_regions(media, frame),
-                                illusion_type=video.meta["pairs"][0]["illusion_type"], submit=True)
+                save_annotation(session, frame.id, annotator, version=0, regions=true_regions(media, frame, video),
+                                illusion_type=None, submit=True)
                 annotated.append(frame.id)
     return annotated
 
@@ -51,11 +51,16 @@ def accept_generated_samples(session: Session, curator: User) -> int:
     return len(ids)
 
 
-def _true_regions(media: MediaStore, frame: Frame) -> list[dict[str, object]]:
+def true_regions(media: MediaStore, frame: Frame, video: Video) -> list[dict[str, object]]:
+    """A synthetic frame's regions from its true masks, each illusion typed as its scene says (a
+    scene holds a picture and a mirror: ``video.meta["pairs"]``, from its ``scene.json``)."""
+    types = {int(p["pair"]): p["illusion_type"] for p in video.meta.get("pairs", []) if p.get("illusion_type")}
     regions = []
     for name, key in sorted(frame.assets.items()):
         kind, _, pair = name.partition("_")
         if kind in ("illusion", "support") and pair.isdigit():
             mask = load_output(media, key, "mask")
-            regions.append({"pair": int(pair), "kind": kind, "mask": mask_to_rle(mask), "clicks": [{"from": "ground truth"}]})
+            typed = {"illusion_type": types[int(pair)]} if kind == "illusion" and int(pair) in types else {}
+            regions.append({"pair": int(pair), "kind": kind, "mask": mask_to_rle(mask),
+                            "clicks": [{"from": "ground truth"}], **typed})
     return regions

@@ -118,8 +118,10 @@ def generate_job(ctx: JobContext) -> dict[str, Any]:
             ctx.log(f"annotation moved on to version {version} since this job was queued; generating that")
         regions = [(r.pair, r.kind, r.mask_rle) for r in ann.regions]
         illusion_type = ann.illusion_type.value if ann.illusion_type else None
+        # Mask files are numbered from 00 in the pairs' order, whatever numbers the page gave them.
+        order = {pair: n for n, pair in enumerate(sorted({r.pair for r in ann.regions}))}
         # A pair's own type (a frame can hold a picture and a mirror), else the annotation's.
-        pair_types = {mask_name("illusion", r.pair): (r.illusion_type.value if r.illusion_type else illusion_type)
+        pair_types = {mask_name("illusion", order[r.pair]): (r.illusion_type.value if r.illusion_type else illusion_type)
                       for r in ann.regions if r.kind == RegionKind.illusion}
     left = load_output(media, frame.media_key, "left")
     ctx.progress(0.1, "monocular disparity")
@@ -148,7 +150,7 @@ def generate_job(ctx: JobContext) -> dict[str, Any]:
     outputs: dict[str, Any] = {
         "left": left, "right": view.image, "disparity": disparity, "disparity_rect": rect.disparity,
         "disparity_mono": mono.disparity, "holes": view.holes,
-        "masks": {mask_name(kind, pair): mask for pair, p in pairs
+        "masks": {mask_name(kind, order[pair]): mask for pair, p in pairs
                   for kind, mask in (("illusion", p.illusion), ("support", p.support)) if mask is not None},
     }
     files = store_outputs(media, outputs)

@@ -21,7 +21,7 @@ from dataset.geometry.benchmark import reference_plane_fit, reference_right_view
 from dataset.models import Frame, Job, Sample, User
 from dataset.services import jobs as job_service
 from dataset.services.annotate import save_annotation
-from dataset.services.demo import _true_regions
+from dataset.services.demo import true_regions
 from dataset.synthetic import read_video, write_synthetic_dataset
 from webapp.benchmarks.workspace import approved_frame_workspace
 from webapp.jobs.handlers import HANDLERS
@@ -34,8 +34,8 @@ def run_generate_bench(size: tuple[int, int] = (1920, 1080), repeats: int = 3) -
         rt, frame_id, user_id = approved_frame_workspace(root / "ws", scene)
         with transaction(rt.sessions) as s:
             frame = s.get(Frame, frame_id)
-            save_annotation(s, frame_id, s.get(User, user_id), version=0, regions=_true_regions(rt.media, frame),
-                            illusion_type="picture", submit=True)
+            save_annotation(s, frame_id, s.get(User, user_id), version=0, regions=true_regions(rt.media, frame, frame.video),
+                            illusion_type=None, submit=True)
         cpu, wall = [], []
         for _ in range(repeats):
             with transaction(rt.sessions) as s:
