@@ -7,14 +7,22 @@ workers name theirs as they start), and that place is kept. Nothing below them m
 whoever could plant one could point it anywhere: a run's or a report's own folder that is a link is
 refused (:class:`LinkedFolder`), to the jobs that would write into it as to the pages that would
 read it, and a file is served only when no part of its path below the folder is a link.
+
+A file is served from the descriptor :func:`open_contained` opens, walking down from ``runs/`` (or
+``evaluations/``) one name at a time without following links: checking a path and opening it again
+later would serve whatever a swap put under that name meanwhile. A regular file with a second (hard)
+link is not served either: that link may be the name of a file outside the workspace.
 """
 
 from __future__ import annotations
 
+import fcntl
 import functools
 import os
+from collections.abc import Callable
 from pathlib import Path, PurePosixPath
-from typing import TYPE_CHECKING
+from stat import S_ISREG
+from typing import TYPE_CHECKING, BinaryIO
 
 from dataset.services.errors import NotFound
 
@@ -63,18 +71,78 @@ def _first_link(folder: Path) -> Path | None:
 
 
 def contained_file(folder: Path, relative: str) -> Path | None:
-    """``folder/relative`` when it is a regular file reached without leaving ``folder`` (an
-    :func:`owned_folder`, itself no link) and without any symbolic link below it; else None.
-    A name the file system refuses (a part over 255 bytes, a link loop) is None too."""
-    parts = PurePosixPath(relative)
-    if not relative or "\0" in relative or parts.is_absolute() or ".." in parts.parts:
+    """``folder/relative`` when :func:`open_contained` would open it (a regular file with one link,
+    reached without leaving ``folder`` and without any symbolic link); else None. Only for a check or
+    a message: a caller that reads or serves the file opens it with :func:`open_contained`, since
+    the name may be swapped for a link between this check and a later open by path."""
+    file = open_contained(folder, relative)
+    if file is None:
         return None
-    path = Path(folder) / parts
+    file.close()
+    return Path(folder) / PurePosixPath(relative)
+
+
+# Never follow a link, never block (a FIFO planted under a served name would hold the worker until a
+# writer came), never take a terminal as the process's own.
+_WALK = os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC | os.O_NONBLOCK | os.O_NOCTTY
+SharedLinks = Callable[[int, str, int], bool]  # (the folder's descriptor, the file's name, its descriptor)
+
+
+def open_contained(folder: Path, relative: str, *, shared: SharedLinks | None = None) -> BinaryIO | None:
+    """``folder/relative`` opened for reading, or None when it is missing, not a regular file, has
+    more than one (hard) link, or is reached through a symbolic link anywhere below ``folder``'s
+    parent — ``folder`` being an :func:`owned_folder` (``storage_root(top)/name``) — or through
+    ``..``. Each part is opened from its parent's descriptor without following links, so no swap of
+    a name for a link, before or after, changes which file is served: serve and read what this
+    returns, never the path again. ``shared(dir_fd, name, fd)`` may accept a file with more than
+    one link (the caller's own second name for it in the same folder)."""
+    parts = _parts(relative)
+    if parts is None:
+        return None
+    folder = Path(folder)
     try:
-        # The folder's own path has no link (its parent is resolved, it is not one): resolving changes
-        # the path exactly when some part of it below the folder is a link.
-        if Path(os.path.normpath(path)) != path.resolve(strict=True) or not path.is_file():
-            return None
-    except (OSError, RuntimeError):  # missing, a name too long, a loop (RuntimeError before Python 3.13)
+        # The top folder (storage_root's, resolved once per process) is opened by its path; from it
+        # on, nothing is.
+        parent = os.open(folder.parent, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
+    except OSError:
         return None
-    return path
+    try:
+        for name in (folder.name, *parts[:-1]):
+            below = os.open(name, _WALK | os.O_DIRECTORY, dir_fd=parent)
+            os.close(parent)
+            parent = below
+        fd = os.open(parts[-1], _WALK, dir_fd=parent)
+    except (OSError, ValueError):  # missing, a link (ELOOP), not a folder, a name too long, a NUL
+        os.close(parent)
+        return None
+    try:
+        served = _served(parent, parts[-1], fd, shared)
+    except OSError:
+        served = False
+    finally:
+        os.close(parent)
+    if not served:
+        os.close(fd)
+        return None
+    # Reads of a regular file never block anyway; the flag was for the open alone.
+    fcntl.fcntl(fd, fcntl.F_SETFL, fcntl.fcntl(fd, fcntl.F_GETFL) & ~os.O_NONBLOCK)
+    return os.fdopen(fd, "rb")
+
+
+def _parts(relative: str) -> tuple[str, ...] | None:
+    """The names ``relative`` walks through, or None for an empty, absolute or ``..`` path."""
+    if not relative or "\0" in relative:
+        return None
+    path = PurePosixPath(relative)
+    if path.is_absolute() or ".." in path.parts or not path.parts:
+        return None
+    return path.parts
+
+
+def _served(dir_fd: int, name: str, fd: int, shared: SharedLinks | None) -> bool:
+    """Whether the opened ``fd`` may be served: a regular file whose only link is ``name``, or one
+    ``shared`` accepts. A second link may be one to a file outside the workspace (a secret)."""
+    stat = os.fstat(fd)
+    if not S_ISREG(stat.st_mode):
+        return False
+    return stat.st_nlink == 1 or (shared is not None and shared(dir_fd, name, fd))

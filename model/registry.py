@@ -24,12 +24,12 @@ import re
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 from sqlalchemy.orm import Session
 
 from dataset.atomic import atomic_write_bytes
-from dataset.contained import LinkedFolder
+from dataset.contained import LinkedFolder, open_contained
 from dataset.services import training
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from model.train import BEST_NAME, CHECKPOINT_DIR, KEEP_FILE
@@ -40,6 +40,7 @@ IMPORTED = "imported"
 IMPORTED_DIR = Path("checkpoints") / IMPORTED  # under the workspace home
 IMPORTED_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
 _RUN_NAME = re.compile(r"(\d+):([^/\\]+)")
+_PINNED = re.compile(r"best_step_\d{7,}\.pt")  # freeze's hard link to best.pt
 NAME_HINT = "RUN:NAME (a run's best, last or checkpoint file, e.g. 3:best) or imported:NAME"
 
 
@@ -85,6 +86,49 @@ def run_checkpoint(runs_dir: Path, run_id: int, which: str, *, best_step: int | 
         names = ", ".join([*ALIASES, *(f.name for f in files)])
         raise NotFound(f"run {run_id} has no checkpoint {which!r}; it has {names}")
     return found
+
+
+def open_run_checkpoint(runs_dir: Path, run_id: int, which: str, *,
+                        best_step: int | None) -> tuple[CheckpointFile, BinaryIO]:
+    """:func:`run_checkpoint`, and its file opened to send, walking down from ``runs/`` without
+    following links (``dataset.contained.open_contained``): NotFound, as for a missing file, when it
+    has been swapped for a link or something not a regular file, or has a (hard) link outside its
+    folder."""
+    found = run_checkpoint(runs_dir, run_id, which, best_step=best_step)
+    file = open_contained(training.run_dir(Path(runs_dir), run_id), f"{CHECKPOINT_DIR}/{found.name}",
+                          shared=_pinned_pair)
+    if file is None:
+        raise NotFound(f"run {run_id} has no checkpoint {found.name!r} to download")
+    return found, file
+
+
+def _pinned_pair(dir_fd: int, name: str, fd: int) -> bool:
+    """Whether the file with two links opened as ``name`` (``fd``) is one :func:`freeze` pinned:
+    ``best.pt`` and ``best_step_N.pt``, both in this folder. A second link of any other name, or a
+    third, may be the name of a file outside the workspace. The count is read again at the end: a
+    link made or removed meanwhile changes it or the file's change time, and the file is refused."""
+    stat = os.fstat(fd)
+    if stat.st_nlink != 2:
+        return False
+    if name == BEST_NAME:  # open_contained counts an error here as a refusal
+        partners = [n for n in os.listdir(dir_fd) if _PINNED.fullmatch(n)]
+    elif _PINNED.fullmatch(name):
+        partners = [BEST_NAME]
+    else:
+        return False
+    if not _same_file(dir_fd, name, stat) or not any(_same_file(dir_fd, n, stat) for n in partners):
+        return False
+    again = os.fstat(fd)
+    return again.st_nlink == 2 and again.st_ctime_ns == stat.st_ctime_ns
+
+
+def _same_file(dir_fd: int, name: str, stat: os.stat_result) -> bool:
+    """Whether ``name`` in the folder is, without following a link, the file ``stat`` describes."""
+    try:
+        other = os.stat(name, dir_fd=dir_fd, follow_symlinks=False)
+    except OSError:
+        return False
+    return (other.st_dev, other.st_ino) == (stat.st_dev, stat.st_ino)
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from flask import g, request, send_file
+from flask import g, request
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
@@ -17,6 +17,7 @@ from webapp.api.blueprint import api, id_list_arg, int_arg, json_body
 from webapp.auth import requires
 from webapp.jobs import runs as run_control
 from webapp.runtime import runtime
+from webapp.served import send_opened
 
 
 def _run_json(run_id: int) -> dict[str, Any]:
@@ -96,6 +97,5 @@ def promote_run(run_id: int) -> ResponseReturnValue:
 def download_checkpoint(run_id: int, name: str) -> ResponseReturnValue:
     """One of the run's checkpoint files by name (never a path the caller makes up, never a link)."""
     run = training.get_run(g.db, run_id)
-    found = registry.run_checkpoint(runtime().settings.runs_dir, run.id, name, best_step=run.best_step)
-    return send_file(found.path, mimetype="application/octet-stream", as_attachment=True,
-                     download_name=f"run{run_id}_{found.name}", max_age=0)
+    found, file = registry.open_run_checkpoint(runtime().settings.runs_dir, run.id, name, best_step=run.best_step)
+    return send_opened(file, f"run{run_id}_{found.name}", mimetype="application/octet-stream", as_attachment=True)

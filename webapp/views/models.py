@@ -6,13 +6,14 @@ API (``/api/v1/runs…``), which enforces the same roles.
 
 from __future__ import annotations
 
+from pathlib import PurePosixPath
 from typing import Any
 
-from flask import Blueprint, Response, abort, g, render_template, send_file
+from flask import Blueprint, Response, abort, g, render_template
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
-from dataset.contained import contained_file
+from dataset.contained import open_contained
 from dataset.models import IllusionType, Role, Video
 from dataset.readers import READER_FORMATS
 from dataset.services import run_logs, training
@@ -23,6 +24,7 @@ from webapp.api.blueprint import id_list_arg, int_arg
 from webapp.auth import requires
 from webapp.redact import app_redactor
 from webapp.runtime import runtime
+from webapp.served import send_opened
 
 bp = Blueprint("models", __name__)
 
@@ -79,10 +81,11 @@ def val_image(run_id: int, name: str) -> ResponseReturnValue:
     """A validation image the engine wrote, by its path in the run directory (``val/step_…/x.png``)."""
     training.get_run(g.db, run_id)
     directory = training.run_dir(runtime().settings.runs_dir, run_id)
-    path = contained_file(directory, name)
-    if path is None or path.suffix != ".png" or not path.is_relative_to(directory / "val"):
+    parts = PurePosixPath(name)
+    file = open_contained(directory, name) if parts.suffix == ".png" and parts.parts[:1] == ("val",) else None
+    if file is None:
         abort(404, f"run {run_id} has no validation image {name!r}")
-    return send_file(path, mimetype="image/png", max_age=3600, conditional=True)
+    return send_opened(file, parts.name, mimetype="image/png", max_age=3600)
 
 
 @bp.get("/models/runs/<int:run_id>/log")
