@@ -41,7 +41,14 @@ class DatabaseInt(AsciiIntegerConverter):
 
 
 STALE_UPLOAD_S = 600.0
-STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
+
+
+def static_dir() -> Path:
+    """The pages' scripts, styles and icons: ``webapp/static`` in an installed wheel (setup.py copies
+    it there), else the top-level ``static/`` of the checkout this package runs from."""
+    package = Path(__file__).resolve().parent
+    packaged = package / "static"
+    return packaged if packaged.is_dir() else package.parent / "static"
 
 
 def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
@@ -49,7 +56,7 @@ def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
     rt = runtime or Runtime(settings)
     # Part files of uploads a killed server left behind (a live upload keeps writing its part).
     clean_incoming(rt.media, older_than_s=STALE_UPLOAD_S)
-    app = Flask(__name__, static_folder=str(STATIC_DIR), static_url_path="/static")
+    app = Flask(__name__, static_folder=str(static_dir()), static_url_path="/static")
     app.config.update(
         SECRET_KEY=settings.secret_key or _stored_secret(settings.home),
         SESSION_COOKIE_HTTPONLY=True,
