@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import click
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -107,3 +108,24 @@ def test_data_dir_option_beats_the_environment(tmp_path: Path) -> None:
     a, b = tmp_path / "a", tmp_path / "b"
     assert cli("--data-dir", str(b), "init", env={"ILLUSION_STUDIO_HOME": str(a)}).returncode == 0
     assert (b / "illusion-studio.db").is_file() and not a.exists()
+
+
+def test_help_loads_no_subcommand_and_no_torch() -> None:
+    """`illusion-studio --help` and `runs --help` list commands from their summaries: no torch, no
+    database layer, no benchmarks (they took 3–5 s to start before)."""
+    probe = ("import sys\nfrom webapp.cli import main\nfor args in (['--help'], ['runs', '--help']):\n"
+             "    try:\n        main(args)\n    except SystemExit:\n        pass\n"
+             "print(sorted(m for m in ('torch', 'sqlalchemy', 'alembic', 'webapp.cli.bench', 'model') if m in sys.modules))")
+    result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip().splitlines()[-1] == "[]"
+    assert "list     Every run" in result.stdout
+
+
+def test_the_command_list_says_what_each_command_says_of_itself() -> None:
+    from webapp.cli import COMMANDS, main
+
+    context = click.Context(main)
+    for name, (_, _, summary) in COMMANDS.items():
+        command = main.get_command(context, name)
+        assert command is not None and command.get_short_help_str(limit=1000) == summary, name

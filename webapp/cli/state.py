@@ -4,12 +4,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
-from dataset.db import schema_is_current
-from dataset.settings import Settings, SettingsError, load_settings
-from webapp.runtime import Runtime
+if TYPE_CHECKING:  # the database layer loads when a command first needs it, not for `--help`
+    from dataset.settings import Settings
+    from webapp.runtime import Runtime
 
 
 @dataclass
@@ -21,6 +22,8 @@ class CliState:
     @property
     def settings(self) -> Settings:
         """The workspace's settings; a missing data dir or bad settings file is a one-line error."""
+        from dataset.settings import SettingsError, load_settings
+
         if self._settings is None:
             try:
                 self._settings = load_settings(self.data_dir)
@@ -31,6 +34,9 @@ class CliState:
     @property
     def runtime(self) -> Runtime:
         """DB, media and queue of an initialised workspace."""
+        from dataset.db import schema_is_current
+        from webapp.runtime import Runtime
+
         if self._runtime is None:
             rt = Runtime(self.settings)
             if not schema_is_current(rt.engine):
