@@ -145,4 +145,12 @@ def _served(dir_fd: int, name: str, fd: int, shared: SharedLinks | None) -> bool
     stat = os.fstat(fd)
     if not S_ISREG(stat.st_mode):
         return False
-    return stat.st_nlink == 1 or (shared is not None and shared(dir_fd, name, fd))
+    if stat.st_nlink != 1:
+        return shared is not None and shared(dir_fd, name, fd)
+    # One link now is not enough: a second link present at the open and removed since leaves the file
+    # opened (the outside one) with its one outside link. ``name`` must still be that file, with that
+    # one link, and the count must not have moved meanwhile (a link made or removed changes the ctime).
+    named = os.stat(name, dir_fd=dir_fd, follow_symlinks=False)
+    again = os.fstat(fd)
+    return ((named.st_dev, named.st_ino) == (stat.st_dev, stat.st_ino) and named.st_nlink == 1
+            and again.st_nlink == 1 and again.st_ctime_ns == stat.st_ctime_ns)

@@ -9,12 +9,18 @@ import os
 import shutil
 from pathlib import Path
 
+import numpy as np
+import pytest
+
+from dataset.contained import contained_file, open_contained, storage_root
 from dataset.db import transaction
-from dataset.models import Evaluation, Job
-from dataset.services import evaluations, training
+from dataset.formats import write_pfm
+from dataset.models import Evaluation, EvaluationResult, Job, JobState, TrainingRun
+from dataset.services import evaluations, run_logs, training
 from dataset.services import jobs as job_service
 from tests.conftest import make_settings, migrate
-from tests.runs_data import add_accepted_samples
+from tests.evaluations_data import evaluated_database
+from tests.runs_data import H, W, add_accepted_samples
 from tests.test_run_logs import write_launch
 from tests.test_runs import SHORT, _queued_run, write_checkpoint
 from tests.test_trust_boundary import bearer, samples, settings  # noqa: F401  (fixtures)
@@ -127,6 +133,270 @@ def test_long_names_are_a_404_not_a_crash(client, tokens, runtime, samples) -> N
     for url in (f"/api/v1/evaluations/{evaluation_id}/files/{LONG}", f"/api/v1/evaluations/{evaluation_id}/files/x/{LONG}.json",
                 f"/models/runs/{run_id}/files/val/{LONG}.png", f"/api/v1/runs/{run_id}/checkpoints/{LONG}"):
         assert client.get(url, headers=curator).status_code == 404, url
+
+
+def report_folder_of(runtime) -> tuple[int, Path]:  # type: ignore[no-untyped-def]
+    """A succeeded evaluation's row and its report folder, with a report and a picture: (evaluation id, folder)."""
+    with transaction(runtime.sessions) as s:
+        job = job_service.create_job(s, "evaluate", {}, None)
+        job.state = JobState.succeeded
+        folder = evaluations.report_folder(runtime.settings.home, job.id)
+        evaluation = Evaluation(job_id=job.id, dataset="x", report_dir=str(folder))
+        s.add(evaluation)
+        s.flush()
+        evaluation_id = evaluation.id
+    (folder / "pictures").mkdir(parents=True)
+    (folder / "pictures" / "a.png").write_bytes(PICTURE)
+    (folder / "report.json").write_text('{"methods": {}}')
+    return evaluation_id, folder
+
+
+PICTURE = b"\x89PNG the report's own picture"
+
+
+def test_a_hard_link_to_an_outside_file_is_not_served(client, tokens, runtime, samples) -> None:  # type: ignore[no-untyped-def]
+    """The workspace's secret key, hard linked into a run's checkpoints (by name, as last, as best), a
+    run's val/ and a report: the same 404 as a missing file, and not a byte of it."""
+    secret = runtime.settings.home / "secret_key"
+    key = secret.read_bytes()
+    curator = bearer(tokens, "curator")
+    run_id = _queued_run(runtime)
+    directory = training.run_dir(runtime.settings.runs_dir, run_id)
+    (directory / "checkpoints").mkdir()
+    os.link(secret, directory / "checkpoints" / "step_0000009.pt")
+    os.link(secret, directory / "checkpoints" / "best.pt")
+    with transaction(runtime.sessions) as s:
+        s.get(TrainingRun, run_id).best_step = 9
+    (directory / "val" / "step_1").mkdir(parents=True)
+    os.link(secret, directory / "val" / "step_1" / "x.png")
+    evaluation_id, report = report_folder_of(runtime)
+    os.link(secret, report / "pictures" / "key.png")
+    (report / "report.json").unlink()
+    os.link(secret, report / "report.json")
+    urls = [f"/api/v1/runs/{run_id}/checkpoints/{name}" for name in ("step_0000009.pt", "last", "best", "best.pt")]
+    urls += [f"/models/runs/{run_id}/files/val/step_1/x.png",
+             f"/api/v1/evaluations/{evaluation_id}/files/pictures/key.png",
+             f"/api/v1/evaluations/{evaluation_id}/files/report.json"]
+    for url in urls:
+        answer = client.get(url, headers=curator)
+        assert answer.status_code == 404 and key not in answer.data, url
+        assert str(runtime.settings.home) not in answer.get_data(as_text=True), url
+    page = client.get(f"/evaluations/{evaluation_id}", headers=curator)  # the page, without the report
+    assert page.status_code == 200 and key not in page.data
+
+
+def test_a_hard_link_to_an_outside_file_is_not_a_run_log(client, tokens, runtime, samples) -> None:  # type: ignore[no-untyped-def]
+    """The workspace's secret key hard linked as rank 0's stdout.log: the log routes list and read the
+    run's own stderr.log only, and with both files hard links there is no log at all; never a byte of the key."""
+    secret = runtime.settings.home / "secret_key"
+    key = secret.read_bytes().strip()
+    curator = bearer(tokens, "curator")
+    run_id = _queued_run(runtime)
+    directory = training.run_dir(runtime.settings.runs_dir, run_id)
+    write_launch(directory, "r1", "the run's own out\n", "the run's own line\n")
+    rank0 = directory / "logs" / "r1" / "attempt_0" / "0"
+    (rank0 / "stdout.log").unlink()
+    os.link(secret, rank0 / "stdout.log")
+    url = f"/models/runs/{run_id}/log"
+    tail = client.get(url, headers=curator)
+    assert tail.status_code == 200 and key not in tail.data
+    assert tail.json["files"] == ["logs/r1/attempt_0/0/stderr.log"], tail.json
+    assert tail.json["lines"] == ["── 1 of 1: logs/r1/attempt_0/0/stderr.log ──", "the run's own line"]
+    assert tail.json["bytes"] == len("the run's own line\n")
+    whole = client.get(f"{url}.txt", headers=curator)
+    assert whole.status_code == 200 and key not in whole.data
+    assert whole.get_data(as_text=True) == "── 1 of 1: logs/r1/attempt_0/0/stderr.log ──\nthe run's own line\n"
+    (rank0 / "stderr.log").unlink()
+    os.link(secret, rank0 / "stderr.log")
+    tail = client.get(url, headers=curator)
+    assert tail.status_code == 200 and tail.json["files"] == [] and tail.json["lines"] == [] and key not in tail.data
+    whole = client.get(f"{url}.txt", headers=curator)
+    assert whole.status_code == 404 and key not in whole.data
+
+
+def test_the_pinned_best_checkpoint_is_served_under_both_its_names(client, tokens, runtime, samples, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """best.pt and the best_step_N.pt a promote hard links to it are the run's own file; a third link
+    (outside the folder) makes neither of them the run's alone."""
+    run_id = _queued_run(runtime)
+    folder = training.run_dir(runtime.settings.runs_dir, run_id) / "checkpoints"
+    write_checkpoint(folder / "best.pt", 4)
+    os.link(folder / "best.pt", folder / "best_step_0000004.pt")
+    with transaction(runtime.sessions) as s:
+        s.get(TrainingRun, run_id).best_step = 4
+    curator = bearer(tokens, "curator")
+    urls = [f"/api/v1/runs/{run_id}/checkpoints/{name}" for name in ("best", "best.pt", "best_step_0000004.pt")]
+    for url in urls:
+        answer = client.get(url, headers=curator)
+        assert answer.status_code == 200 and answer.data == (folder / "best.pt").read_bytes(), url
+    os.link(folder / "best.pt", tmp_path / "elsewhere.pt")
+    for url in urls:
+        assert client.get(url, headers=curator).status_code == 404, url
+    (tmp_path / "elsewhere.pt").unlink()
+    os.link(folder / "best.pt", folder / "step_0000004.pt")  # two names are the pin; a third is not
+    for url in urls:
+        assert client.get(url, headers=curator).status_code == 404, url
+    (folder / "step_0000004.pt").unlink()
+    (folder / "best.pt").unlink()  # validation improved: best.pt replaced, the pinned file alone
+    write_checkpoint(folder / "best.pt", 6)
+    assert client.get(urls[2], headers=curator).data == (folder / "best_step_0000004.pt").read_bytes()
+
+
+def test_a_linked_folder_below_a_run_or_a_report_is_not_followed(client, tokens, runtime, samples, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    outside = outside_tree(tmp_path)
+    curator = bearer(tokens, "curator")
+    run_id = _queued_run(runtime)
+    directory = training.run_dir(runtime.settings.runs_dir, run_id)
+    (directory / "val").mkdir()
+    (directory / "val" / "step_1").symlink_to(outside / "val")
+    (directory / "checkpoints").symlink_to(outside / "checkpoints")
+    evaluation_id, report = report_folder_of(runtime)
+    shutil.rmtree(report / "pictures")
+    (report / "pictures").symlink_to(outside / "val")
+    (report / "deep").mkdir()
+    (report / "deep" / "up").symlink_to(outside)
+    for url in (f"/models/runs/{run_id}/files/val/step_1/x.png", f"/api/v1/runs/{run_id}/checkpoints/step_0000001.pt",
+                f"/api/v1/evaluations/{evaluation_id}/files/pictures/x.png",
+                f"/api/v1/evaluations/{evaluation_id}/files/deep/up/report.json",
+                f"/api/v1/evaluations/{evaluation_id}/files/deep/up/val/x.png"):
+        answer = client.get(url, headers=curator)
+        assert answer.status_code == 404 and b"outside" not in answer.data, url
+
+
+@pytest.mark.timeout(60)
+def test_a_fifo_or_a_folder_under_a_served_name_is_a_404_at_once(client, tokens, runtime, samples) -> None:  # type: ignore[no-untyped-def]
+    """Only regular files are served; opening a FIFO would wait for a writer that never comes."""
+    curator = bearer(tokens, "curator")
+    run_id = _queued_run(runtime)
+    val = training.run_dir(runtime.settings.runs_dir, run_id) / "val"
+    val.mkdir()
+    os.mkfifo(val / "pipe.png")
+    (val / "folder.png").mkdir()
+    (val / "checkpoints").mkdir()
+    evaluation_id, report = report_folder_of(runtime)
+    os.mkfifo(report / "pictures" / "pipe.png")
+    os.mkfifo(report / "pipe.json")
+    for url in (f"/models/runs/{run_id}/files/val/pipe.png", f"/models/runs/{run_id}/files/val/folder.png",
+                f"/api/v1/evaluations/{evaluation_id}/files/pictures/pipe.png",
+                f"/api/v1/evaluations/{evaluation_id}/files/pipe.json", f"/api/v1/evaluations/{evaluation_id}/files/pictures"):
+        assert client.get(url, headers=curator).status_code == 404, url
+
+
+def test_files_served_from_their_descriptor_keep_validators_and_ranges(client, tokens, runtime, samples) -> None:  # type: ignore[no-untyped-def]
+    curator = bearer(tokens, "curator")
+    run_id = _queued_run(runtime)
+    directory = training.run_dir(runtime.settings.runs_dir, run_id)
+    (directory / "val" / "step_1").mkdir(parents=True)
+    (directory / "val" / "step_1" / "x.png").write_bytes(PICTURE)
+    write_checkpoint(directory / "checkpoints" / "step_0000002.pt", 2)
+    evaluation_id, _ = report_folder_of(runtime)
+    checkpoint = (directory / "checkpoints" / "step_0000002.pt").read_bytes()
+    for url, data in ((f"/models/runs/{run_id}/files/val/step_1/x.png", PICTURE),
+                      (f"/api/v1/evaluations/{evaluation_id}/files/pictures/a.png", PICTURE),
+                      (f"/api/v1/runs/{run_id}/checkpoints/last", checkpoint)):
+        whole = client.get(url, headers=curator)
+        assert whole.status_code == 200 and whole.data == data and whole.content_length == len(data), url
+        assert whole.headers["ETag"] and whole.headers["Last-Modified"] and whole.headers["Accept-Ranges"] == "bytes"
+        assert str(runtime.settings.home) not in str(whole.headers), url
+        assert client.get(url, headers={**curator, "If-None-Match": whole.headers["ETag"]}).status_code == 304
+        later = client.get(url, headers={**curator, "If-Modified-Since": whole.headers["Last-Modified"]})
+        assert later.status_code == 304, url
+        part = client.get(url, headers={**curator, "Range": "bytes=1-4"})
+        assert part.status_code == 206 and part.data == data[1:5], url
+        assert client.get(url, headers={**curator, "Range": f"bytes={len(data) + 10}-"}).status_code == 416, url
+    download = client.get(f"/api/v1/runs/{run_id}/checkpoints/step_0000002.pt", headers=curator)
+    assert download.headers["Content-Disposition"] == f"attachment; filename=run{run_id}_step_0000002.pt"
+    assert download.mimetype == "application/octet-stream"
+    picture = client.get(f"/models/runs/{run_id}/files/val/step_1/x.png", headers=curator)
+    assert picture.mimetype == "image/png" and picture.headers["Cache-Control"] == "public, max-age=3600"
+
+
+def test_a_sample_of_an_evaluation_reads_its_prediction_and_confidence_without_links(client, tokens, runtime, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """The pictures of one evaluated sample read the report's own PFM files, never one a link names."""
+    job_id, ids = evaluated_database(runtime, tmp_path)
+    worst, curator = ids[-1], bearer(tokens, "curator")
+    with transaction(runtime.sessions) as s:
+        evaluation_id = s.query(Evaluation).filter(Evaluation.job_id == job_id).one().id
+        prediction = s.query(EvaluationResult).filter(EvaluationResult.sample_id == worst,
+                                                       EvaluationResult.method == "predictions").one().prediction
+    report = evaluations.report_folder(runtime.settings.home, job_id)
+    confidence = report / "predictions" / "confidence" / prediction
+    confidence.parent.mkdir(parents=True, exist_ok=True)
+    write_pfm(confidence, np.full((H, W), 0.5, np.float32))
+    sample = f"/evaluations/{evaluation_id}/samples/{worst}"
+    assert "confidence" in client.get(f"{sample}?method=predictions", headers=curator).get_data(as_text=True)
+    for image in ("prediction", "confidence"):
+        answer = client.get(f"{sample}/predictions/{image}.png", headers=curator)
+        assert answer.status_code == 200 and answer.data[:4] == b"\x89PNG", image
+    outside = tmp_path / "outside.pfm"
+    write_pfm(outside, np.full((H, W), 9.0, np.float32))
+    confidence.unlink()
+    confidence.symlink_to(outside)
+    assert client.get(f"{sample}/predictions/confidence.png", headers=curator).status_code == 404
+    assert "confidence" not in client.get(f"{sample}?method=predictions", headers=curator).get_data(as_text=True) \
+        .split("evaluation-pictures")[1]
+    predicted = report / "predictions" / "predictions" / prediction
+    predicted.unlink()
+    os.link(outside, predicted)
+    assert client.get(f"{sample}/predictions/prediction.png", headers=curator).status_code == 404
+
+
+def test_what_open_contained_opens_is_the_file_it_checked(tmp_path: Path) -> None:
+    """The file opened is the one served, whatever is put under its name afterwards; odd names are None."""
+    top = tmp_path / "runs"
+    (top / "1" / "val").mkdir(parents=True)
+    (top / "1" / "val" / "x.png").write_bytes(b"own")
+    (tmp_path / "secret").write_bytes(b"secret")
+    folder = storage_root(top) / "1"
+    with open_contained(folder, "val/x.png") as file:  # type: ignore[union-attr]
+        (top / "1" / "val" / "link").symlink_to(tmp_path / "secret")
+        os.replace(top / "1" / "val" / "link", top / "1" / "val" / "x.png")
+        assert file.read() == b"own"
+    assert open_contained(folder, "val/x.png") is None and contained_file(folder, "val/x.png") is None
+    for name in ("", "/etc/passwd", "../1/val/x.png", "val/../val/x.png", "val/\0.png", LONG, f"val/{LONG}", "val", "."):
+        assert open_contained(folder, name) is None, name
+    (top / "1" / "val" / "y.png").write_bytes(b"y")
+    assert contained_file(folder, "val/./y.png") == folder / "val" / "y.png"
+    os.link(top / "1" / "val" / "y.png", tmp_path / "y-elsewhere")
+    assert open_contained(folder, "val/y.png") is None
+    assert open_contained(top / "2", "val/y.png") is None  # a run with no folder
+
+
+def test_a_hard_link_removed_after_the_open_is_not_served(tmp_path: Path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """An outside file hard linked as a run's log file when it is opened, the link replaced by the
+    run's own file before the links are counted: the file opened (the outside one) has a single link
+    by then, but the name no longer holds it, and it is not read — by open_contained nor the log."""
+    secret = tmp_path / "secret_key"
+    secret.write_bytes(b"SECRET\n")
+    folder = storage_root(tmp_path / "runs") / "1"
+    write_launch(folder, "r1", "own out\n", "own err\n")
+    rank0 = folder / "logs" / "r1" / "attempt_0" / "0"
+    fstat = os.fstat
+    planted: list[Path] = []
+
+    def replaced_before_the_count(fd: int) -> os.stat_result:
+        for name in planted:  # once: the planter puts the run's own file back under the name
+            (name.parent / ".own").write_bytes(b"own\n")
+            os.replace(name.parent / ".own", name)
+        planted.clear()
+        return fstat(fd)
+
+    monkeypatch.setattr(os, "fstat", replaced_before_the_count)
+
+    def plant(stream: str) -> None:  # the secret's second link, put back by the run's own file just after its open
+        (rank0 / stream).unlink()
+        os.link(secret, rank0 / stream)
+        planted.append(rank0 / stream)
+
+    for stream in ("stdout.log", "stderr.log"):
+        plant(stream)
+        opened = open_contained(folder, f"logs/r1/attempt_0/0/{stream}")
+        assert opened is None or b"SECRET" not in opened.read(), stream
+        if opened is not None:
+            opened.close()
+    plant("stdout.log")
+    assert "SECRET" not in "".join(run_logs.log_lines(folder))
+    plant("stdout.log")
+    assert "SECRET" not in str(run_logs.tail(folder, 100))
 
 
 # ---- writing -------------------------------------------------------------------------------------

@@ -58,6 +58,45 @@ def test_a_planted_symlink_is_never_read(tmp_path: Path) -> None:
     assert run_logs.rank0_files(run_dir) == []
 
 
+def test_a_log_file_is_read_from_what_was_opened_not_its_path_again(tmp_path: Path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """A log file swapped for a link to an outside file right after it was opened: the tail, the
+    whole log and the byte count are still the run's own file's."""
+    run_dir = tmp_path / "runs" / "2"
+    write_launch(run_dir, "r1", "own out\n", "own err\n")
+    secret = tmp_path / "secret.txt"
+    secret.write_text("password\n" * 100)
+    opened = run_logs.open_contained
+
+    def open_then_swap(folder: Path, relative: str):  # type: ignore[no-untyped-def]
+        file = opened(folder, relative)
+        link = folder / relative
+        link.unlink()
+        link.symlink_to(secret)
+        return file
+
+    monkeypatch.setattr(run_logs, "open_contained", open_then_swap)
+    tail = run_logs.tail(run_dir, 10)
+    assert tail["lines"] == ["── 1 of 2: logs/r1/attempt_0/0/stdout.log ──", "own out",
+                             "── 2 of 2: logs/r1/attempt_0/0/stderr.log ──", "own err"]
+    assert tail["bytes"] == len("own out\nown err\n") and tail["more"] is False
+    write_launch(run_dir, "r2", "own out 2\n", "own err 2\n", started=4_000_000_000)
+    text = "".join(run_logs.log_lines(run_dir))
+    assert "password" not in text and "own out 2\n" in text and "own err 2\n" in text
+
+
+def test_a_hard_linked_log_file_is_not_listed(tmp_path: Path) -> None:
+    run_dir = tmp_path / "runs" / "5"
+    write_launch(run_dir, "r1", "own\n", "own\n")
+    secret = tmp_path / "secret.txt"
+    secret.write_text("password\n")
+    stdout = run_dir / "logs" / "r1" / "attempt_0" / "0" / "stdout.log"
+    stdout.unlink()
+    os.link(secret, stdout)
+    assert [p.name for p in run_logs.rank0_files(run_dir)] == ["stderr.log"]
+    assert "password" not in "".join(run_logs.log_lines(run_dir))
+    assert "password" not in str(run_logs.tail(run_dir, 100))
+
+
 def test_tail_keeps_the_last_lines_with_the_file_headers(settings, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     run_dir = training.run_dir(settings.runs_dir, 4)
     write_launch(run_dir, "r1", "".join(f"step {i}\n" for i in range(50)),

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 from sqlalchemy import delete, func, select
 from sqlalchemy.orm import Session
 
-from dataset.contained import REPORTS, contained_file, owned_folder
+from dataset.contained import REPORTS, contained_file, open_contained, owned_folder
 from dataset.models import Evaluation, EvaluationResult, Frame, Sample, User, Video
 from dataset.redact import shown
 from dataset.services.dataset_roots import folder_label
@@ -151,6 +151,18 @@ def report_file(evaluation: Evaluation, name: str, home: Path) -> Path:
     if path is None:
         raise NotFound(f"evaluation {evaluation.id} has no report file {name!r}")
     return path
+
+
+def open_report_file(evaluation: Evaluation, name: str, home: Path) -> BinaryIO:
+    """A file of the evaluation's report folder, opened without following any link (what to serve
+    or read, never its path again); NotFound as :func:`report_file` says."""
+    if evaluation.job_id is None:
+        raise NotFound(f"evaluation {evaluation.id} has no report yet")
+    report_file(evaluation, name, home)  # the report's own checks, and their reasons
+    file = open_contained(report_folder(home, evaluation.job_id), name)
+    if file is None:  # swapped for something else since the check
+        raise NotFound(f"evaluation {evaluation.id} has no report file {name!r}")
+    return file
 
 
 def _sort_column(region: str, metric: str) -> Any:

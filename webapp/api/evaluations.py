@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from pathlib import Path
+from pathlib import PurePosixPath
 
-from flask import Response, g, send_file
+from flask import Response, g
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
@@ -16,6 +16,7 @@ from webapp.api.blueprint import api, json_body
 from webapp.auth import requires
 from webapp.redact import app_redactor
 from webapp.runtime import runtime
+from webapp.served import send_opened
 
 
 @api.get("/evaluations")
@@ -48,11 +49,13 @@ def launch_evaluation() -> ResponseReturnValue:
 def evaluation_file(evaluation_id: int, name: str) -> ResponseReturnValue:
     """A file of the report folder (report.json, per_sample.csv, pictures, predictions) by relative path."""
     evaluation = evaluations.get_evaluation(g.db, evaluation_id)
-    path: Path = evaluations.report_file(evaluation, name, runtime().settings.home)
-    if path.suffix in _TEXT:  # written by a job, which may quote server paths (a sample's failure)
-        text = path.read_text(encoding="utf-8", errors="replace")
-        return Response(app_redactor()(text), mimetype=_TEXT[path.suffix])
-    return send_file(path, max_age=0, conditional=True)
+    file = evaluations.open_report_file(evaluation, name, runtime().settings.home)
+    suffix = PurePosixPath(name).suffix
+    if suffix in _TEXT:  # written by a job, which may quote server paths (a sample's failure)
+        with file:
+            text = file.read().decode("utf-8", errors="replace")
+        return Response(app_redactor()(text), mimetype=_TEXT[suffix])
+    return send_opened(file, PurePosixPath(name).name)
 
 
 _TEXT = {".json": "application/json", ".html": "text/html", ".csv": "text/csv", ".txt": "text/plain"}

@@ -10,13 +10,12 @@ from __future__ import annotations
 
 import json
 from io import BytesIO
-from pathlib import Path
 
 import numpy as np
 from flask import Blueprint, abort, g, render_template, request, send_file
 from flask.typing import ResponseReturnValue
 
-from dataset.formats import read_pfm
+from dataset.formats import decode_pfm
 from dataset.models import Evaluation, Role, Sample
 from dataset.preview.evaluation_maps import EVALUATION_IMAGES, evaluation_image
 from dataset.preview.images import encode_png
@@ -57,7 +56,7 @@ def report(evaluation_id: int) -> ResponseReturnValue:
     """The report, from its ``report.json``."""
     evaluation = evaluations.get_evaluation(g.db, evaluation_id)
     try:  # written by the job, which may quote server paths (a sample's failure)
-        data = app_redactor().value(json.loads(_report_file(evaluation, "report.json").read_text(encoding="utf-8")))
+        data = app_redactor().value(json.loads(_report_bytes(evaluation, "report.json")))
     except NotFound:
         data = None
     regions: list[str] = []
@@ -79,7 +78,7 @@ def sample(evaluation_id: int, sample_id: int) -> ResponseReturnValue:
     result = evaluations.sample_result(g.db, evaluation_id, sample_id, method)
     return render_template("evaluation_sample.html", evaluation=evaluations.evaluation_json(evaluation),
                            sample=sample_review.get_sample(g.db, sample_id), method=method, result=result,
-                           has_confidence=_confidence_path(evaluation, result.prediction) is not None)
+                           has_confidence=_has_confidence(evaluation, result.prediction))
 
 
 @bp.get("/evaluations/<int:evaluation_id>/samples/<int:sample_id>/<method>/<image>.png")
@@ -92,9 +91,9 @@ def sample_image(evaluation_id: int, sample_id: int, method: str, image: str) ->
     result = evaluations.sample_result(g.db, evaluation_id, sample_id, method)
     if not result.prediction:
         abort(404, f"evaluation {evaluation_id} kept no {method} prediction of sample {sample_id}")
-    prediction = read_pfm(_report_file(evaluation, f"predictions/{method}/{result.prediction}"))
-    confidence_path = _confidence_path(evaluation, result.prediction)
-    confidence = read_pfm(confidence_path) if confidence_path and image == "confidence" else None
+    name = f"predictions/{method}/{result.prediction}"
+    prediction = decode_pfm(_report_bytes(evaluation, name), name)
+    confidence = _confidence(evaluation, result.prediction) if image == "confidence" else None
     row = g.db.get(Sample, sample_id)
     gt = load_output(runtime().media, row.files["disparity"], "disparity")
     if "valid" in row.files:
@@ -107,14 +106,26 @@ def sample_image(evaluation_id: int, sample_id: int, method: str, image: str) ->
     return send_file(BytesIO(encode_png(rgb)), mimetype="image/png", max_age=0)
 
 
-def _report_file(evaluation: Evaluation, name: str) -> Path:
-    return evaluations.report_file(evaluation, name, runtime().settings.home)
+def _report_bytes(evaluation: Evaluation, name: str) -> bytes:
+    """A report file's bytes, read from the file the checks opened (never its path again)."""
+    with evaluations.open_report_file(evaluation, name, runtime().settings.home) as file:
+        return file.read()
 
 
-def _confidence_path(evaluation: Evaluation, prediction: str | None) -> Path | None:
-    if not prediction:
-        return None
+def _confidence(evaluation: Evaluation, prediction: str) -> np.ndarray | None:
+    """The confidence map kept beside ``prediction``, or None when the method kept none."""
+    name = f"predictions/confidence/{prediction}"
     try:
-        return _report_file(evaluation, f"predictions/confidence/{prediction}")
+        return decode_pfm(_report_bytes(evaluation, name), name)
     except NotFound:
         return None
+
+
+def _has_confidence(evaluation: Evaluation, prediction: str | None) -> bool:
+    if not prediction:
+        return False
+    try:
+        evaluations.open_report_file(evaluation, f"predictions/confidence/{prediction}", runtime().settings.home).close()
+    except NotFound:
+        return False
+    return True
