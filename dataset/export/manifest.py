@@ -13,7 +13,7 @@ from pathlib import Path, PurePosixPath
 from typing import Any
 
 from dataset.export.errors import LayoutError
-from dataset.models import FrameState, IllusionType, SampleState, SourceKind
+from dataset.states import FrameState, IllusionType, SampleState, SourceKind
 from dataset.version import code_version
 
 FORMAT = "illusion-studio/native"

@@ -19,6 +19,7 @@ from sqlalchemy.orm import Session
 from dataset.export.errors import LayoutError
 from dataset.export.records import SampleRecord, VideoInfo
 from dataset.models import Annotation, Frame, Sample, SampleState, Video
+from dataset.wording import quoted
 
 DEFAULT_STATES = ("accepted",)
 
@@ -27,7 +28,7 @@ def parse_states(states: Sequence[str]) -> list[str]:
     """Validated sample states (``generated``, ``accepted``, ``rejected``), deduplicated, sorted."""
     bad = [s for s in states if s not in SampleState.__members__]
     if bad or not states:
-        raise LayoutError(f"unknown sample state {bad[0]!r}" if bad else "choose at least one sample state")
+        raise LayoutError(f"unknown sample state {quoted(bad[0])}" if bad else "choose at least one sample state")
     return sorted(set(states))
 
 

@@ -14,15 +14,20 @@ import math
 import re
 
 from dataset.export.errors import LayoutError
+from dataset.wording import quoted
 
 SPLIT_NAME = re.compile(r"^[a-z0-9][a-z0-9_-]{0,31}$")
 DEFAULT_SPLIT = "train=1"
+# The smallest share a split may have: 1%. Less would hold no video of any dataset this tool makes
+# (1e-300 parses, and would only be a split in name).
+MIN_FRACTION = 0.01
 
 
 def parse_split_spec(text: str) -> dict[str, float]:
     """``"train=0.8,test=0.2"`` → ``{"train": 0.8, "test": 0.2}`` (order kept).
 
-    Names are lower-case ``[a-z0-9_-]``; fractions are > 0 and sum to 1 (within 1e-6).
+    Names are lower-case ``[a-z0-9_-]``; a fraction is 0 (the split is left out) or at least
+    MIN_FRACTION, and they sum to 1 (within 1e-6).
     """
     spec: dict[str, float] = {}
     for part in text.split(","):
@@ -32,16 +37,18 @@ def parse_split_spec(text: str) -> dict[str, float]:
             fraction = float(value)
         except ValueError:
             fraction = math.nan
-        if not sep or not SPLIT_NAME.match(name) or not (math.isfinite(fraction) and fraction > 0):
-            raise LayoutError(f"bad split {part.strip()!r}: expected NAME=FRACTION like train=0.8 "
-                              "(name: lower-case letters, digits, _ or -; fraction > 0)")
+        if not sep or not SPLIT_NAME.match(name) or not math.isfinite(fraction):
+            raise LayoutError(f"bad split {quoted(part.strip())}: expected NAME=FRACTION like train=0.8 "
+                              "(name: lower-case letters, digits, _ or -)")
+        if fraction != 0 and not fraction >= MIN_FRACTION:
+            raise LayoutError(f"split {quoted(part.strip())}: a fraction is 0 or at least {MIN_FRACTION}")
         if name in spec:
-            raise LayoutError(f"split {name!r} is named twice")
+            raise LayoutError(f"split {quoted(name)} is named twice")
         spec[name] = fraction
     total = sum(spec.values())
     if abs(total - 1.0) > 1e-6:
-        raise LayoutError(f"split fractions must sum to 1, got {total:g} in {text!r}")
-    return spec
+        raise LayoutError(f"split fractions must sum to 1, got {total:g} in {quoted(text)}")
+    return {name: fraction for name, fraction in spec.items() if fraction}
 
 
 def format_split_spec(spec: dict[str, float]) -> str:

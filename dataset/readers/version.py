@@ -24,19 +24,19 @@ import math
 from collections.abc import Iterator, Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from sqlalchemy import select
-from sqlalchemy.orm import Session
 
 from dataset.media import MediaKeyError, MediaStore
-from dataset.models import Annotation, Frame, IllusionType, Sample, SampleState, SourceKind, Video
 from dataset.readers.base import Camera, ListedReader, StereoSample, invalidate, make_regions
 from dataset.readers.native import illusion_regions, pair_types, video_camera
 from dataset.samples import load_output
 from dataset.services.errors import InvalidInput
-from dataset.services.scene_groups import group_of
+from dataset.states import IllusionType, SampleState, SourceKind
+
+if TYPE_CHECKING:
+    from sqlalchemy.orm import Session
 
 KINDS = ("synthesized", "capture")
 _BATCH = 256  # rows fetched at a time: sample rows carry JSON blobs (files, qa, provenance)
@@ -56,6 +56,12 @@ def pin_dataset_version(session: Session, media: MediaStore, *, video_ids: Seque
     A sample whose files are missing from the media store is left out and listed in ``skipped``.
     An empty selection gives a version without items (the caller refuses to train on it).
     """
+    # The database layer is imported here, not above: the trainer reads versions (VersionReader)
+    # and loads none of it.
+    from sqlalchemy import select
+
+    from dataset.models import Video
+
     filters = _filters(video_ids, illusion_types, kinds, qa_flags)
     videos = {row.id: row for row in session.execute(select(Video.id, Video.name, Video.source_kind, Video.illusion_types,
                                                             Video.meta, Video.scene_group))}
@@ -182,6 +188,10 @@ def _filters(video_ids: Sequence[int] | None, illusion_types: Sequence[str] | No
 
 def _newest_accepted(session: Session, video_ids: list[int] | None) -> Iterator[Any]:
     """Accepted sample rows, the newest annotation version of each frame only, streamed in batches."""
+    from sqlalchemy import select
+
+    from dataset.models import Annotation, Frame, Sample
+
     query = (select(Sample.id, Sample.frame_id, Sample.annotation_version, Sample.files, Sample.params, Sample.provenance,
                     Sample.qa, Frame.index, Frame.video_id, Annotation.illusion_type)
              .join(Frame, Frame.id == Sample.frame_id).outerjoin(Annotation, Annotation.frame_id == Frame.id)
@@ -197,6 +207,8 @@ def _newest_accepted(session: Session, video_ids: list[int] | None) -> Iterator[
 
 
 def _item(row: Any, video: Any) -> dict[str, Any]:
+    from dataset.services.scene_groups import group_of
+
     capture = row.provenance.get("source") == "capture" or video.source_kind == SourceKind.real_capture
     frame_type = row.illusion_type.value if row.illusion_type is not None else row.provenance.get("illusion_type")
     types = pair_types([name for name in row.files.get("masks", {}) if name.startswith("illusion_")], frame_type,

@@ -12,22 +12,28 @@ from datetime import datetime
 from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
-from sqlalchemy import select, update
+from sqlalchemy import delete, select, update
 from sqlalchemy.orm import Session
 
-from dataset.formats import FormatError, mask_to_rle, rle_to_mask
+from dataset.formats import FormatError
+from dataset.formats.rle import canonical_rle
 from dataset.models import Annotation, Frame, FrameState, IllusionType, Region, RegionKind, User, utcnow
 from dataset.services import audit, proposals
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.frames import get_frame, update_frame
 from dataset.services.leases import ensure_annotation_row, held_by_other, release_lease, renew_lease
 from dataset.services.sample_review import returned_note, returned_waiting
-from dataset.services.validate import DB_INT_MAX, db_int, shown
+from dataset.services.validate import DB_INT_MAX, db_int
+from dataset.wording import quoted
 
 ANNOTATABLE = (FrameState.approved,)
 DELETE_REASONS = ("redundant", "imperceptible")
 MAX_REGIONS = 64
 MAX_CLICKS = 1000  # entries per region; the page sends its clicks, one box and a link or two
+# JSON values and keys a draft holds besides its masks' runs, as webapp.api.blueprint.too_many_values
+# counts them: a click entry takes at most 7 ({"x", "y", "label"}: a brace, three colons, two commas
+# and the comma after it), and a region's own fields, its mask's and the draft's far fewer than 64.
+DRAFT_VALUES = MAX_REGIONS * (7 * MAX_CLICKS + 64) + 64
 
 
 class _Entry(BaseModel):
@@ -156,9 +162,10 @@ def save_annotation(session: Session, frame_id: int, user: User | Any, *, versio
                           .execution_options(synchronize_session=False)).rowcount
     if won != 1:
         raise stale
+    # The old rows go unread (a full draft's masks and clicks are MBs once parsed), and before the new
+    # ones arrive (unique (annotation, pair, kind)).
+    session.execute(delete(Region).where(Region.annotation_id == ann.id))
     session.refresh(ann)
-    ann.regions.clear()
-    session.flush()  # the unique (annotation, pair, kind) rows go before the new ones arrive
     ann.regions.extend(parsed)
     if submit:
         ann.lease_user_id = ann.lease_expires_at = None
@@ -174,7 +181,7 @@ def _parse_type(value: str) -> IllusionType:
     try:
         return IllusionType(value)
     except ValueError:
-        raise InvalidInput(f"unknown illusion type {shown(value)}; choose one of {', '.join(IllusionType)}") from None
+        raise InvalidInput(f"unknown illusion type {quoted(value)}; choose one of {', '.join(IllusionType)}") from None
 
 
 def _parse_regions(regions: Sequence[Any], height: int, width: int, *, require_illusion: bool) -> list[Region]:
@@ -193,11 +200,11 @@ def _parse_regions(regions: Sequence[Any], height: int, width: int, *, require_i
             raise InvalidInput(f"pair {pair} has two {kind.value} regions")
         seen.add((pair, kind))
         try:
-            mask = rle_to_mask(r.get("mask"), (height, width))
+            mask_rle = canonical_rle(r.get("mask"), (height, width))
         except FormatError as exc:
             raise InvalidInput(f"region {n}: {exc}") from None
         clicks = _clicks(r.get("clicks") or [], height, width, f"region {n}")
-        out.append(Region(pair=pair, kind=kind, mask_rle=mask_to_rle(mask), clicks=clicks))
+        out.append(Region(pair=pair, kind=kind, mask_rle=mask_rle, clicks=clicks))
     types: dict[int, IllusionType] = {}
     for n, (r, region) in enumerate(zip(regions, out, strict=True)):
         if r.get("illusion_type"):

@@ -11,6 +11,7 @@ from collections.abc import Mapping
 from pathlib import Path, PurePosixPath
 
 from dataset.services.errors import InvalidInput
+from dataset.wording import quoted
 
 
 def folder_label(root: str, path: str = "") -> str:
@@ -22,8 +23,8 @@ def resolve_folder(roots: Mapping[str, Path], root: str, path: str = "") -> Path
     """The folder ``path`` inside the registered root ``root``; InvalidInput otherwise."""
     if root not in roots:
         known = ", ".join(sorted(roots)) or "none: an admin lists them as dataset_roots in the settings"
-        raise InvalidInput(f"no dataset root named {root!r}; registered roots: {known}")
-    refused = InvalidInput(f"{folder_label(root, path)} is not a folder inside dataset root {root!r}")
+        raise InvalidInput(f"no dataset root named {quoted(root)}; registered roots: {known}")
+    refused = InvalidInput(f"{quoted(folder_label(root, path))} is not a folder inside dataset root {quoted(root)}")
     relative = PurePosixPath(path)
     if "\0" in path or "\\" in path or relative.is_absolute() or ".." in relative.parts:
         raise refused

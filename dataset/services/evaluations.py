@@ -21,6 +21,7 @@ from dataset.redact import shown
 from dataset.services.dataset_roots import folder_label
 from dataset.services.errors import InvalidInput, NotFound
 from dataset.services.sample_review import sample_json
+from dataset.wording import quoted
 
 SORT_REGIONS = ("all", "illusion")  # the regions with indexed columns
 SORT_METRICS = ("epe", "bad2")
@@ -149,7 +150,7 @@ def report_file(evaluation: Evaluation, name: str, home: Path) -> Path:
                        f"the web serves reports under {REPORTS}/ only")
     path = contained_file(folder, name)
     if path is None:
-        raise NotFound(f"evaluation {evaluation.id} has no report file {name!r}")
+        raise NotFound(f"evaluation {evaluation.id} has no report file {quoted(name)}")
     return path
 
 
@@ -161,7 +162,7 @@ def open_report_file(evaluation: Evaluation, name: str, home: Path) -> BinaryIO:
     report_file(evaluation, name, home)  # the report's own checks, and their reasons
     file = open_contained(report_folder(home, evaluation.job_id), name)
     if file is None:  # swapped for something else since the check
-        raise NotFound(f"evaluation {evaluation.id} has no report file {name!r}")
+        raise NotFound(f"evaluation {evaluation.id} has no report file {quoted(name)}")
     return file
 
 
@@ -215,7 +216,7 @@ def sample_result(session: Session, evaluation_id: int, sample_id: int, method: 
         EvaluationResult.evaluation_id == evaluation_id, EvaluationResult.sample_id == sample_id,
         EvaluationResult.method == method))
     if row is None:
-        raise NotFound(f"evaluation {evaluation_id} has no {method} result for sample {sample_id}")
+        raise NotFound(f"evaluation {evaluation_id} has no {quoted(method)} result for sample {sample_id}")
     return row
 
 

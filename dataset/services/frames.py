@@ -11,6 +11,7 @@ from sqlalchemy.orm import Session
 from dataset.models import Frame, FrameCount, FrameState, Video, utcnow
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.paging import Page, keyset_page
+from dataset.wording import quoted
 
 # Which states count as having reached each funnel stage (rejected/deleted frames drop out; of the
 # rejected ones, those the prefilter rejected never passed it, see funnel_counts).
@@ -73,7 +74,7 @@ def parse_state(value: str) -> FrameState:
     try:
         return FrameState(value)
     except ValueError:
-        raise InvalidInput(f"unknown frame state {value!r}; choose one of {', '.join(FrameState)}") from None
+        raise InvalidInput(f"unknown frame state {quoted(value)}; choose one of {', '.join(FrameState)}") from None
 
 
 FRAME_ORDER = (Frame.video_id, Frame.index)  # every frame list's order, and its keyset cursor

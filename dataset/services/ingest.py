@@ -26,7 +26,7 @@ from dataset.services.jobs import JobContext
 from dataset.services.prefilter import launch_prefilter
 from dataset.services.scene_groups import join_scene_group
 from dataset.thumbnails import put_thumbnail
-from dataset.wording import plural
+from dataset.wording import plural, quoted
 
 DEFAULT_FPS = 2.0  # the paper's sampling rate
 DEFAULT_DEDUP_HAMMING = 4
@@ -40,10 +40,10 @@ def ingest_params(path: str, *, fps: float | None = DEFAULT_FPS, source: str | N
     if fps is not None and not 0 < fps <= 240:
         raise InvalidInput("fps must be in (0, 240]")
     if source is not None and source not in SourceKind.__members__:
-        raise InvalidInput(f"unknown source {source!r}; choose one of {', '.join(SourceKind)}")
+        raise InvalidInput(f"unknown source {quoted(source)}; choose one of {', '.join(SourceKind)}")
     bad = [t for t in illusion_types or [] if t not in IllusionType.__members__]
     if bad:
-        raise InvalidInput(f"unknown illusion type {bad[0]!r}; choose from {', '.join(IllusionType)}")
+        raise InvalidInput(f"unknown illusion type {quoted(bad[0])}; choose from {', '.join(IllusionType)}")
     if dedup_hamming is not None and not 0 <= dedup_hamming <= 64:
         raise InvalidInput("dedup_hamming must be 0..64 bits (or None: keep near-duplicates)")
     return {"path": path, "fps": fps, "source": source, "illusion_types": illusion_types or [],

@@ -24,14 +24,16 @@ from sqlalchemy.orm import Session
 
 from dataset.atomic import atomic_write_bytes
 from dataset.contained import LinkedFolder, owned_folder
-from dataset.export.splits import parse_split_spec, split_of
+from dataset.export.splits import MIN_FRACTION, parse_split_spec, split_of
 from dataset.media import MediaStore
 from dataset.models import Frame, IllusionType, JobState, RunState, Sample, SampleState, TrainingMetric, TrainingRun, User, utcnow
 from dataset.readers import READER_FORMATS, open_reader
 from dataset.readers.version import pin_dataset_version, split_by_video, version_counts, version_media_keys
 from dataset.redact import shown
+from dataset.run_layout import INIT_FILE
 from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
+from dataset.wording import quoted
 
 SPLITS = ("train", "val", "test")
 DEFAULT_SPLIT = "train=0.8,val=0.1,test=0.1"
@@ -62,9 +64,6 @@ class DataSelection:
         return "accepted samples" + "".join(f", {p}" for p in parts if p)
 
 
-INIT_FILE = "init.json"  # RUN_DIR/init.json: the engine's {"loaded", "fresh", "unused"} keys of an init_stereo start
-
-
 @dataclass(frozen=True)
 class Launch:
     """How a run is started: processes per node and devices, and where it starts from."""
@@ -88,14 +87,15 @@ def run_dir(runs_dir: Path, run_id: int) -> Path:
 
 
 def parse_split(text: str) -> dict[str, float]:
-    """``train=0.8,val=0.1,test=0.1`` → fractions; only train/val/test, train and val > 0."""
+    """``train=0.8,val=0.1,test=0.1`` → fractions; only train/val/test, train and val not 0."""
     fractions = parse_split_spec(text)
     unknown = sorted(set(fractions) - set(SPLITS))
     if unknown:
-        raise InvalidInput(f"split {unknown[0]!r}: a run splits into {', '.join(SPLITS)} only")
+        raise InvalidInput(f"split {quoted(unknown[0])}: a run splits into {', '.join(SPLITS)} only")
     for needed in ("train", "val"):
-        if fractions.get(needed, 0.0) <= 0:
-            raise InvalidInput(f"split: {needed} needs a fraction > 0 (validation picks the checkpoints)")
+        if needed not in fractions:
+            raise InvalidInput(f"split: {needed} needs a fraction of at least {MIN_FRACTION} "
+                               "(validation picks the checkpoints)")
     return {name: fractions.get(name, 0.0) for name in SPLITS}
 
 
@@ -105,15 +105,15 @@ def validate_selection(selection: DataSelection) -> None:
             raise InvalidInput("--data names a folder; give its --format (the database needs no folder)")
         bad = [t for t in selection.illusion_types if t not in IllusionType.__members__]
         if bad:
-            raise InvalidInput(f"illusion type {bad[0]!r}: expected one of {', '.join(IllusionType)}")
+            raise InvalidInput(f"illusion type {quoted(bad[0])}: expected one of {', '.join(IllusionType)}")
         bad = [k for k in selection.kinds if k not in SAMPLE_KINDS]
         if bad:
-            raise InvalidInput(f"kind {bad[0]!r}: expected {' or '.join(SAMPLE_KINDS)}")
+            raise InvalidInput(f"kind {quoted(bad[0])}: expected {' or '.join(SAMPLE_KINDS)}")
         return
     if selection.format not in READER_FORMATS:
-        raise InvalidInput(f"data format {selection.format!r}: expected {DATABASE} or one of {', '.join(READER_FORMATS)}")
+        raise InvalidInput(f"data format {quoted(selection.format)}: expected {DATABASE} or one of {', '.join(READER_FORMATS)}")
     if not selection.root or not Path(selection.root).is_dir():
-        raise InvalidInput(f"data folder {selection.label or selection.root!r} is not a directory")
+        raise InvalidInput(f"data folder {quoted(selection.label or selection.root)} is not a directory")
     if selection.video_ids or selection.illusion_types or selection.kinds or selection.qa_ok:
         raise InvalidInput("video, illusion type, kind and QA filters select from the database, not from a folder")
 
@@ -126,7 +126,7 @@ def validate_launch(launch: Launch) -> None:
     if launch.nnodes > 1 and not launch.rdzv_endpoint:
         raise InvalidInput("a multi-node run needs a rendezvous endpoint HOST:PORT that every node reaches")
     if launch.rdzv_endpoint and not re.match(r"^[A-Za-z0-9_.\-\[\]:]+:\d{1,5}$", launch.rdzv_endpoint):
-        raise InvalidInput(f"rendezvous endpoint {launch.rdzv_endpoint!r}: expected HOST:PORT")
+        raise InvalidInput(f"rendezvous endpoint {quoted(launch.rdzv_endpoint)}: expected HOST:PORT")
     if launch.init_checkpoint is not None and not Path(launch.init_checkpoint).is_file():
         raise InvalidInput(f"init checkpoint {launch.init_label or launch.init_checkpoint} is not a file")
 

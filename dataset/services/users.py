@@ -22,8 +22,8 @@ from dataset.models import ApiToken, Role, User, utcnow
 from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.sessions import end_user_sessions
-from dataset.services.validate import DB_INT_MAX, shown
-from dataset.wording import plural
+from dataset.services.validate import DB_INT_MAX
+from dataset.wording import plural, quoted
 
 _NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")  # always fullmatch: "$" would let "admin\n" through
 MIN_PASSWORD = 8
@@ -34,7 +34,7 @@ def parse_role(value: str) -> Role:
     try:
         return Role(value)
     except ValueError:
-        raise InvalidInput(f"unknown role {shown(value)}; choose one of {', '.join(Role)}") from None
+        raise InvalidInput(f"unknown role {quoted(value)}; choose one of {', '.join(Role)}") from None
 
 
 def create_user(session: Session, name: str, role: Role | str, password: str) -> User:
@@ -63,7 +63,7 @@ def _check_password(password: str) -> None:
 def get_user(session: Session, name: str) -> User:
     user = session.scalar(select(User).where(User.name == name))
     if user is None:
-        raise NotFound(f"no user named {name!r}")
+        raise NotFound(f"no user named {quoted(name)}")
     return user
 
 

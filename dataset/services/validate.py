@@ -11,7 +11,6 @@ from dataset.services.errors import InvalidInput
 DB_INT_MAX = 2**31 - 1
 TEXT_CHARS = 1000  # any text field a request carries, unless the field says less
 REASON_CHARS = 256  # a reviewer's reason: stored, and shown to the annotator on their page
-_SHOWN_CHARS = 40
 
 
 def db_int(value: Any, what: str, *, minimum: int = -DB_INT_MAX, maximum: int = DB_INT_MAX) -> int:
@@ -39,9 +38,3 @@ def reason_text(value: str) -> str:
     """A reviewer's reason, stripped, of at most REASON_CHARS characters (kept as written: it is the
     reviewer's text for the person it goes to)."""
     return optional_text((value or "").strip(), "reason", max_chars=REASON_CHARS)
-
-
-def shown(value: Any) -> str:
-    """A client's value as an error message quotes it: its repr, cut short (errors do not echo requests)."""
-    text = repr(value)
-    return text if len(text) <= _SHOWN_CHARS else text[:_SHOWN_CHARS - 1] + "…"

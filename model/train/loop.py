@@ -32,7 +32,7 @@ from torch import nn
 from torch.nn.parallel import DistributedDataParallel
 
 from dataset.atomic import atomic_write_bytes
-from dataset.services.training import INIT_FILE
+from dataset.run_layout import INIT_FILE
 from model.checkpoint import load_checkpoint, load_fitting, load_network, save_checkpoint
 from model.data import open_split, training_loader
 from model.losses import fusion_loss

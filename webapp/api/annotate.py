@@ -16,6 +16,7 @@ from dataset.services.errors import InvalidInput, NotFound, Unavailable
 from dataset.services.validate import db_int, optional_text
 from webapp.api.blueprint import api, get_or_404, json_body
 from webapp.auth import requires
+from webapp.memory import give_back_after_request
 from webapp.runtime import runtime
 
 
@@ -108,7 +109,8 @@ def segment(frame_id: int) -> ResponseReturnValue:
 @api.post("/frames/<int:frame_id>/annotation")
 @requires(Role.annotator)
 def save_annotation(frame_id: int) -> ResponseReturnValue:
-    body = json_body()
+    give_back_after_request()  # a draft's MBs do not stay with the process
+    body = json_body(many_masks=True, max_values=annotate.DRAFT_VALUES)
     version = db_int(body.get("version"), "version (the annotation_version you loaded)", minimum=0)
     submit = bool(body.get("submit", True))
     ann = annotate.save_annotation(g.db, frame_id, current_user, version=version, regions=body.get("regions", []),

@@ -50,7 +50,7 @@ def create_user() -> ResponseReturnValue:
     body = json_body()
     user = user_service.create_user(g.db, optional_text(body.get("name"), "name"),
                                     optional_text(body.get("role"), "role"),
-                                    optional_text(body.get("password"), "password"))
+                                    optional_text(body.get("password"), "password", max_chars=user_service.MAX_PASSWORD))
     g.db.commit()
     return user_service.user_json(user), 201
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from dataset.models import IllusionType
+from dataset.services.users import MAX_PASSWORD, MIN_PASSWORD
 from model.launch import openapi_schemas
 
 
@@ -257,7 +258,8 @@ def openapi_document() -> dict[str, Any]:
                 "UserList": _list("User"),
                 "NewUser": {"type": "object", "required": ["name", "role", "password"],
                             "properties": {"name": {"type": "string"}, "role": {"enum": ["annotator", "curator", "admin"]},
-                                           "password": {"type": "string", "minLength": 8}}},
+                                           "password": {"type": "string", "minLength": MIN_PASSWORD,
+                                                        "maxLength": MAX_PASSWORD}}},
                 "Frame": {"type": "object", "properties": {
                     "id": {"type": "integer"}, "video_id": {"type": "integer"},
                     "video": {"type": "string", "description": "the video's name"}, "index": {"type": "integer"},

@@ -14,7 +14,7 @@ from dataset.db import transaction
 from dataset.models import IllusionType
 from dataset.services import training
 from model import registry
-from model.launch import RunLaunch, backbone_dirs, validate
+from model.launch import MIN_LR, RunLaunch, backbone_dirs, validate
 from model.launcher import engine_options
 from model.presets import ALL_PRESETS, load_preset
 from webapp.cli.errors import service_errors
@@ -51,7 +51,7 @@ WHOLE = WholeNumber()
               help="A fusion preset, or raft-stereo: RAFT-Stereo's own network, the stereo-only baseline.")
 @click.option("--steps", type=WHOLE, help="Training steps (preset's by default).")
 @click.option("--batch", type=WHOLE, help="Global batch size.")
-@click.option("--lr", type=click.FloatRange(min=0, min_open=True), help="Peak learning rate (OneCycle).")
+@click.option("--lr", type=click.FloatRange(min=MIN_LR), help="Peak learning rate (OneCycle).")
 @click.option("--crop", help="Random crop HxW in pixels, e.g. 320x736.")
 @click.option("--iters", type=WHOLE, help="GRU iterations in training.")
 @click.option("--devices", default="auto", show_default=True, help="auto, cpu, cuda, or cuda:0,1 (GPUs to use).")

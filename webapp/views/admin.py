@@ -99,4 +99,4 @@ def _change(user_id: int, apply: Callable[[User], T], done: Callable[[User, T], 
 def _users_page(form: CreateUserForm) -> str:
     rows = g.db.scalars(select(User).order_by(User.name)).all()
     return render_template("users.html", users=rows, form=form, me=current_user, roles=list(Role),
-                           min_password=user_service.MIN_PASSWORD)
+                           min_password=user_service.MIN_PASSWORD, max_password=user_service.MAX_PASSWORD)

@@ -24,6 +24,7 @@ from dataset.readers.base import resize_disparity
 from dataset.samples import load_output
 from dataset.services import evaluations, sample_review, training
 from dataset.services.errors import NotFound
+from dataset.wording import quoted
 from model import registry
 from model.align import ALIGN_RULES
 from model.evaluate import RESOLUTIONS
@@ -86,7 +87,7 @@ def sample(evaluation_id: int, sample_id: int) -> ResponseReturnValue:
 def sample_image(evaluation_id: int, sample_id: int, method: str, image: str) -> ResponseReturnValue:
     """``image`` in gt, prediction, error, confidence, coloured at the evaluation's resolution."""
     if image not in EVALUATION_IMAGES:
-        abort(404, f"no {image!r} picture; choose from {', '.join(EVALUATION_IMAGES)}")
+        abort(404, f"no {quoted(image)} picture; choose from {', '.join(EVALUATION_IMAGES)}")
     evaluation = evaluations.get_evaluation(g.db, evaluation_id)
     result = evaluations.sample_result(g.db, evaluation_id, sample_id, method)
     if not result.prediction:

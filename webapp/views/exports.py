@@ -23,6 +23,7 @@ from dataset.models import Role, SampleState, User, Video
 from dataset.services import exports
 from dataset.services.errors import Conflict, FieldError
 from dataset.services.validate import DB_INT_MAX
+from dataset.wording import quoted
 from webapp.auth import requires
 from webapp.runtime import runtime
 
@@ -51,7 +52,7 @@ def index() -> ResponseReturnValue:
 
 def _int(text: str, field: str, what: str, maximum: int) -> int:
     if not text.isascii() or not text.isdigit() or int(text) > maximum:
-        raise FieldError(field, f"{what} must be a whole number from 0 to {maximum}, not {text[:20]!r}")
+        raise FieldError(field, f"{what} must be a whole number from 0 to {maximum}, not {quoted(text)}")
     return int(text)
 
 

@@ -21,6 +21,7 @@ from dataset.preview.cache import RenderCache
 from dataset.preview.sample_preview import STAGES, SamplePreview
 from dataset.services import evaluations, sample_review
 from dataset.services.validate import REASON_CHARS
+from dataset.wording import quoted
 from webapp.auth import requires
 from webapp.runtime import runtime
 
@@ -83,7 +84,7 @@ def render(sample_id: int, view: str) -> ResponseReturnValue:
     try:
         path = _preview().render(sample, view, thumb=request.args.get("size") == "thumb")
     except KeyError:
-        abort(404, f"sample {sample_id} has no '{view}' view")
+        abort(404, f"sample {sample_id} has no {quoted(view)} view")
     # A regenerated sample keeps its id but not its images: revalidate (cheap, by ETag) every time.
     return send_file(path, mimetype="image/png", max_age=0, conditional=True, etag=True)
 
@@ -97,7 +98,7 @@ def scene(sample_id: int) -> ResponseReturnValue:
     try:
         path = _preview().scene(sample, stage)
     except KeyError:
-        abort(404, f"sample {sample_id} has no '{stage}' point cloud (stages: {', '.join(STAGES)})")
+        abort(404, f"sample {sample_id} has no {quoted(stage)} point cloud (stages: {', '.join(STAGES)})")
     return send_file(path, mimetype="application/octet-stream", max_age=0, conditional=True, etag=True)
 
 
