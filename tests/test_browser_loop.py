@@ -118,7 +118,8 @@ def test_a_returned_frame_comes_first_with_the_curators_reason(open_page, server
     expect(note.locator("blockquote")).to_have_text(REASON)
     expect(page.locator("#message")).to_have_text(re.compile(r"^Draft loaded: \d+ planes?, sent back by curator: "))
     pairs = page.evaluate("window.annotator.pairs")
-    assert pairs and all(p["illusion"] > 0 and p["type"] == "picture" for p in pairs)  # the draft, typed per plane
+    assert pairs and all(p["illusion"] > 0 for p in pairs)  # the draft, typed per plane as the scene says
+    assert {p["type"] for p in pairs} == {"picture", "mirror"}
     page.screenshot(path=str(tmp_path / "annotate-returned.png"))
 
     # another frame says nothing of it
