@@ -57,6 +57,7 @@ def test_a_guessing_address_is_refused_for_that_account_but_its_owner_logs_in(ap
     refused = login(stranger, "admin")  # the right password, from the address that guessed
     assert refused.status_code == 429 and int(refused.headers["Retry-After"]) > 0
     assert "Too many failed logins for this name from your address" in refused.get_data(as_text=True)
+    assert '<a href="/login">Back to the login page</a>' in refused.get_data(as_text=True)  # a short page, no form
     assert login(stranger, "curator").status_code == 302  # the pair is refused, not the address
     assert login(from_address(app, "198.51.100.7"), "admin").status_code == 302  # nor the account
     assert waits == []

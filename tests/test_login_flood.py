@@ -15,6 +15,7 @@ import time
 import uuid
 from collections import Counter
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -45,13 +46,14 @@ class Served:
         return httpx.Client(base_url=self.url, transport=httpx.HTTPTransport(local_address=address), timeout=30)
 
 
-@pytest.fixture(params=["direct", "proxy"])
-def served(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Served]:
-    """The app under `serve`'s server with small limits: a name's 2nd failure and an address's 4th start the slow-down."""
-    proxied = request.param == "proxy"
-    settings = make_settings(tmp_path / "ws", login_limit_per_account_address="3 per 15 minutes",
-                             login_slowdown_per_account="2 per 15 minutes", login_slowdown_per_address="4 per 15 minutes",
-                             login_slowdown_max_s=MAX_S, **({"trusted_proxies": ["127.0.0.1/32"]} if proxied else {}))
+@contextmanager
+def serve(home: Path, proxied: bool, **overrides: object) -> Iterator[Served]:
+    """The app under `serve`'s server with small limits (a name's 2nd failure and an address's 4th start
+    the slow-down) and an admin; behind a proxy at 127.0.0.1 when ``proxied``."""
+    settings = make_settings(home, **{"login_limit_per_account_address": "3 per 15 minutes",
+                                      "login_slowdown_per_account": "2 per 15 minutes",
+                                      "login_slowdown_per_address": "4 per 15 minutes", "login_slowdown_max_s": MAX_S,
+                                      **({"trusted_proxies": ["127.0.0.1/32"]} if proxied else {}), **overrides})
     migrate(settings.database_url)
     rt = Runtime(settings)
     with transaction(rt.sessions) as s:
@@ -63,6 +65,13 @@ def served(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Served]:
     finally:
         server.close()
         rt.close()
+
+
+@pytest.fixture(params=["direct", "proxy"])
+def served(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Served]:
+    """:func:`serve`, reached directly and through a trusted proxy."""
+    with serve(tmp_path / "ws", proxied=request.param == "proxy") as app:
+        yield app
 
 
 def addresses(served: Served) -> tuple[str, str]:
@@ -116,3 +125,34 @@ def test_a_flood_of_slowed_logins_from_one_address_keeps_neither_the_owner_nor_o
         for thread in threads:
             thread.join(timeout=10)
     assert set(answers) <= {401, 429} and answers[401] and answers[429], answers  # slowed, and refused past the cap
+
+
+def guess_at_once(served: Served, address: str, connections: int, cookies: httpx.Cookies | None = None) -> Counter[int]:
+    """``connections`` connections from ``address`` (with ``cookies``) post a wrong password for admin
+    at the same moment; the statuses answered."""
+    ready = threading.Barrier(connections)
+    answers: Counter[int] = Counter()
+
+    def guess() -> None:
+        with served.client(address) as client:
+            client.cookies.update(cookies or {})
+            token = login_token(client)
+            ready.wait(timeout=30)
+            answers[post_login(client, token, "admin", "wrong-password")] += 1
+
+    threads = [threading.Thread(target=guess) for _ in range(connections)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(timeout=60)
+    return answers
+
+
+@pytest.mark.password_hashing
+def test_parallel_guesses_from_one_address_cannot_pass_its_limit_for_a_name(served: Served) -> None:
+    """16 connections post wrong passwords for one name at once: only the pair's limit (3) have their
+    passwords checked, the rest get 429. Each attempt is counted in the same atomic step that tests
+    the limit, before its password is checked, so attempts in flight together cannot all pass."""
+    attacker, _ = addresses(served)
+    answers = guess_at_once(served, attacker, FLOOD)
+    assert answers == {401: 3, 429: FLOOD - 3}, answers

@@ -2,28 +2,61 @@
 
 Logins (the spirit of OWASP ASVS V2.2). Failed logins are counted per (user name, address), per
 user name and per address. Past ``login_limit_per_account_address`` that address gets 429 with
-``Retry-After`` for that name, its password unchecked: the guesser is refused. The wider counters
-never refuse, since anyone could drive them up; past them a login waits before its password is
-checked, 0.25 s doubling with each further failure up to ``login_slowdown_max_s``, right or wrong
-password alike (the wait tells nothing), then succeeds or fails as usual:
+``Retry-After`` for that name, its password unchecked: the guesser is refused. The pair's count
+goes up as an attempt's password is about to be checked, in the same atomic step that tests the
+limit (a right password then clears it), so however many connections guess in parallel, no more
+than the limit have their passwords checked. The wider counters never refuse, since anyone could
+drive them up; past them a login waits before its password is checked, 0.25 s doubling with each
+further failure up to ``login_slowdown_max_s``, right or wrong password alike (the wait tells
+nothing), then succeeds or fails as usual:
 
 - past ``login_slowdown_per_address`` (one address, all names), every login from that address;
 - past ``login_slowdown_per_account`` (one name, all addresses), the logins for that name from
-  addresses that have themselves failed for it (in the pair counter's window). An address that
-  has not is not made to wait for the others' failures. Making it wait would need a thread for
-  the wait, and so a cap on waiting logins that strangers can fill (with many addresses if the
-  cap is per address), so the owner's login would be refused after all: the README's promise
-  could not be kept. What the exemption gives a guesser is one unslowed guess per name per
-  address and window; a second waits, and the pair's limit refuses it soon after.
+  addresses that have themselves tried it (in the pair counter's window). An address that has
+  not is not made to wait for the others' failures. Making it wait would need a thread for the
+  wait, and so a cap on waiting logins that strangers can fill (with many addresses if the cap
+  is per address), so the owner's login would be refused after all. What the exemption gives a
+  guesser is one unslowed guess per name per address and window; a second waits, and the pair's
+  limit refuses it soon after.
 
-A stranger can thus slow an account down but not lock its owner out: the owner's right password
-from an address that has not been guessing is neither refused nor slowed by anyone else's failures.
+Device cookies (OWASP's "Slow Down Online Guessing Attacks with Device Cookies"). A successful
+login leaves the browser a cookie for that user: the user name and a random nonce, signed with
+the app's secret key as Flask signs its session cookie (itsdangerous; the signature carries the
+time of issue), HttpOnly, SameSite=Lax, Secure when the app is served over HTTPS (``https``),
+sent back only to the login page and valid for ``login_device_cookie_days`` (365; 0 turns device
+cookies off). A later login for that name carrying it is trusted: it is counted only against
+that cookie, never against the pair, name or address counters, and no one's failures slow it
+down or refuse it, so it needs no waiting slot. The cookie has its own limit, the pair's
+(``login_limit_per_account_address`` failures in its window), counted as the pair's is; past
+it the cookie is locked and its logins count as untrusted until the window ends. Each successful
+login issues a new cookie (a new nonce), so a copy of an old one keeps its own failures.
+
+So a stranger can slow an account down but not lock its owner out: the owner's right password is
+neither refused nor slowed by anyone else's failures when it comes with the device cookie of an
+earlier login in that browser, or from an address that has not itself tried the name lately.
+A client without a device cookie should expect, while others flood the login page:
+
+- from an address that has not tried the name (and is not the flood's): no wait and no refusal;
+  its answer comes later than usual only because every request waits its turn for a server
+  thread and for the CPU (measured with one address's 16 connections flooding, on two cores:
+  0.2 s instead of 0.12 s in the median, against 0.18 s under a flood of the cheapest page);
+- from an address that has tried it (a mistyped password within the window), or that the flood
+  shares (one NAT or proxy): a wait of up to ``login_slowdown_max_s`` before its password is
+  checked, or, while the flood holds the waiting slots, 429 with ``Retry-After`` at once, very
+  likely again on each retry until the flood stops. A device cookie is the way past it.
 
 A waiting login holds a server thread, so waits are capped (:class:`WaitingLogins`): at most
 :data:`WAITING_PER_ADDRESS` per client address — one address cannot hold more, however many
 connections it opens — and, of all addresses, half the server's threads, so other routes (and
 logins that need not wait) keep answering. A slowed login past either cap is answered 429 at
 once, its password unchecked. The caps count this process's threads, so they live in memory.
+A flood's refused logins check no password, and so hash none; its waiting logins hash one each
+after its wait: two per address per wait, at most half the server's threads' worth in all. Those
+hashes compete for the CPU (and scrypt's memory) with the logins let through, so a shorter
+``login_slowdown_max_s`` costs them: at 1 s instead of the default 4 s, the clean logins in the
+flood above took about 3 times (up to 5 times) as long as quiet ones instead of 1.7 times. A
+refusal is answered with a one-paragraph page rather than the login form: a third less work for
+each of the hundreds of refusals a second that a flood gets.
 
 Addresses are the clients' as :mod:`webapp.proxies` resolves them behind ``trusted_proxies``; an
 IPv6 client counts by its /64 network, since a machine or household gets a whole /64 and would
@@ -44,9 +77,11 @@ requests that need the queue on that Redis answer 503 anyway.
 """
 from __future__ import annotations
 
+import hashlib
 import ipaddress
 import logging
 import math
+import secrets
 import sqlite3
 import threading
 import time
@@ -55,8 +90,9 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
-from flask import Flask, request
+from flask import Flask, Response, current_app, request
 from flask_limiter import Limiter
+from itsdangerous import BadData, URLSafeTimedSerializer
 from limits import RateLimitItem, parse
 from limits.storage import Storage
 
@@ -68,6 +104,8 @@ T = TypeVar("T")
 FIRST_WAIT_S = 0.25  # the first slowed-down login's wait; each further failure doubles it
 WAITING_PER_ADDRESS = 2  # slowed logins one client address may have waiting at once (a double-clicked form: 2)
 DEFAULT_SERVER_THREADS = 8  # `serve --threads`' default
+DEVICE_COOKIE_PREFIX = "device_"  # then a digest of the user name: one cookie per user of a browser
+DEVICE_COOKIE_SALT = "login-device"  # itsdangerous salt: no other cookie's signature passes for a device cookie's
 
 
 def client_key() -> str:
@@ -124,7 +162,7 @@ def size_for_server(threads: int) -> None:
 
 @dataclass(frozen=True)
 class Counter:
-    """One fixed-window counter of failures: its limit and what it counts for (``key``)."""
+    """One fixed-window counter of failures (or attempts): its limit and what it counts for (``key``)."""
 
     limit: RateLimitItem
     key: tuple[str, ...]
@@ -137,6 +175,11 @@ class Counter:
 
     def hit(self) -> None:
         limiter.limiter.hit(self.limit, *self.key)
+
+    def attempt(self) -> bool:
+        """Count one more and say whether that kept within the limit: one atomic step in the storage,
+        so of parallel requests that all found room before any counted, only the limit's number pass."""
+        return limiter.limiter.hit(self.limit, *self.key)
 
     def clear(self) -> None:
         limiter.limiter.clear(self.limit, *self.key)
@@ -168,21 +211,30 @@ class LoginCounters:
     @classmethod
     def of(cls, settings: Settings, name: str) -> LoginCounters:
         """Counters for user name ``name`` (case and surrounding spaces ignored) from this request's address."""
-        name, client, scope = name.strip().lower(), client_key(), settings.queue_name
+        name, client, scope = normal_name(name), client_key(), settings.queue_name
         return cls(client=client,
                    pair=Counter(parse(settings.login_limit_per_account_address), (scope, "login", name, client)),
                    account=Counter(parse(settings.login_slowdown_per_account), (scope, "login-account", name)),
                    address=Counter(parse(settings.login_slowdown_per_address), (scope, "login-address", client)))
 
     def refused(self) -> int | None:
-        """Seconds until this address may try this name again, once it failed too often; else None."""
+        """Seconds until this address may try this name again, once it failed too often; else None.
+        A quick look, so that a refused pair takes no waiting slot; :meth:`admit` is the binding test."""
         return _unless_down("login throttling", None,
                             lambda: self.pair.retry_after() if self.pair.exceeded() else None)
 
+    def admit(self) -> int | None:
+        """Count this attempt for (name, address) just before its password is checked, in the same
+        atomic step as the test of the limit, so parallel connections cannot all pass a look taken
+        before any of them failed. Seconds until this address may try this name again when this one
+        was past the limit (its password unchecked), else None."""
+        return _unless_down("login throttling", None,
+                            lambda: None if self.pair.attempt() else self.pair.retry_after())
+
     def wait_s(self, settings: Settings) -> float:
         """How long this attempt waits: 0 until the address's failures, or the name's when this
-        address has failed for it too, reach their slow-down limit; then 0.25 s doubling with each
-        further failure, at most ``login_slowdown_max_s``."""
+        address has tried it too (its pair count, cleared by a success), reach their slow-down limit;
+        then 0.25 s doubling with each further failure, at most ``login_slowdown_max_s``."""
         def wait() -> float:
             counters = (self.address, self.account) if self.pair.count() else (self.address,)
             beyond = max(c.count() - c.limit.amount for c in counters)
@@ -203,8 +255,9 @@ class LoginCounters:
         return None
 
     def failed(self) -> None:
+        """Count a wrong password for the name and for the address (:meth:`admit` counted the pair)."""
         def hit() -> None:
-            for counter in (self.pair, self.account, self.address):
+            for counter in (self.account, self.address):
                 counter.hit()
 
         _unless_down("counting a failed login", None, hit)
@@ -213,6 +266,104 @@ class LoginCounters:
         """The owner got in from here: this address's failures for the name are forgotten. The
         wider counters stay, or a guesser could clear them by logging into an account of their own."""
         _unless_down("clearing a login's failures", None, self.pair.clear)
+
+
+def normal_name(name: str) -> str:
+    """A user name as the counters and device cookies know it: case and surrounding spaces ignored."""
+    return name.strip().lower()
+
+
+def device_cookie_name(name: str) -> str:
+    """The cookie that holds this browser's device cookie for user ``name``: one per user, so people
+    who share a browser each keep theirs."""
+    return DEVICE_COOKIE_PREFIX + hashlib.sha256(normal_name(name).encode()).hexdigest()[:16]
+
+
+def _device_serializer() -> URLSafeTimedSerializer:
+    """Signs with the app's secret key (old keys in SECRET_KEY_FALLBACKS still verify), as Flask's session cookie."""
+    keys = [*(current_app.config.get("SECRET_KEY_FALLBACKS") or ()), current_app.secret_key]
+    return URLSafeTimedSerializer(keys, salt=DEVICE_COOKIE_SALT, signer_kwargs={"digest_method": hashlib.sha256})
+
+
+def device_counter(settings: Settings, name: str) -> Counter | None:
+    """The failure counter of the device cookie for ``name`` that this request carries, when it is
+    one this app signed for that name no longer than ``login_device_cookie_days`` ago; else None."""
+    max_age = settings.login_device_cookie_days * 86400
+    raw = request.cookies.get(device_cookie_name(name)) if max_age else None
+    if not raw:
+        return None
+    try:
+        owner, nonce = _device_serializer().loads(raw, max_age=max_age)
+    except (BadData, ValueError, TypeError):  # forged, expired, or not a pair
+        return None
+    if owner != normal_name(name) or not isinstance(nonce, str):
+        return None
+    return Counter(parse(settings.login_limit_per_account_address), (settings.queue_name, "login-device", nonce))
+
+
+def set_device_cookie(response: Response, settings: Settings, name: str, path: str) -> None:
+    """Give this browser a new device cookie for user ``name``, sent back only to ``path`` (the login
+    page's): the user name, a random nonce and, in the signature, the time of issue. A new nonce
+    each login, so the failures counted against an old cookie stay with it."""
+    if not (days := settings.login_device_cookie_days):
+        return
+    value = _device_serializer().dumps([normal_name(name), secrets.token_urlsafe(16)])
+    response.set_cookie(device_cookie_name(name), value, max_age=days * 86400, path=path,
+                        secure=current_app.config["SESSION_COOKIE_SECURE"], httponly=True, samesite="Lax")
+
+
+@dataclass(frozen=True)
+class Refusal:
+    """A login answered 429 with its password unchecked: come back after ``retry_after`` seconds."""
+
+    retry_after: int
+    busy: bool  # the waiting slots were taken (else this address failed too often for this name)
+
+
+@dataclass(frozen=True)
+class LoginAttempt:
+    """One login's throttling: from a browser with a trusted device cookie for the name (``device``,
+    its counter: nothing else counts or slows it), or untrusted (``counters``)."""
+
+    counters: LoginCounters
+    device: Counter | None
+
+    @classmethod
+    def start(cls, settings: Settings, name: str) -> LoginAttempt:
+        """This request's attempt at ``name``. A device cookie's attempt is counted here, before the
+        password is checked (atomically, as :meth:`LoginCounters.admit`); past its limit the cookie
+        is not trusted until its window ends, and the attempt goes the untrusted way."""
+        device = device_counter(settings, name)
+        if device is not None and not _unless_down("device cookie throttling", True, device.attempt):
+            device = None
+        return cls(LoginCounters.of(settings, name), device)
+
+    @property
+    def trusted(self) -> bool:
+        """The request carries a valid device cookie for the name, not locked."""
+        return self.device is not None
+
+    def refusal(self, settings: Settings) -> Refusal | None:
+        """Why this attempt is answered 429 with its password unchecked; None once it may be checked
+        (an untrusted one after its slow-down, and then counted)."""
+        if self.trusted:
+            return None
+        if (wait := self.counters.refused()) is not None:
+            return Refusal(wait, busy=False)
+        if (busy := self.counters.slow_down(settings)) is not None:
+            return Refusal(busy, busy=True)
+        if (wait := self.counters.admit()) is not None:
+            return Refusal(wait, busy=False)
+        return None
+
+    def failed(self) -> None:
+        """A wrong password: a trusted device's failure was counted against the cookie alone."""
+        if not self.trusted:
+            self.counters.failed()
+
+    def succeeded(self) -> None:
+        """The right password: this address's attempts at the name are forgotten (see :meth:`LoginCounters.succeeded`)."""
+        self.counters.succeeded()
 
 
 # One answer for both token limits: which one was hit would tell a guesser which token ids exist.

@@ -8,6 +8,7 @@ from urllib.parse import urlsplit
 from flask import Blueprint, current_app, flash, g, redirect, render_template, request, send_from_directory, session, url_for
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
+from markupsafe import escape
 from sqlalchemy import select
 
 from dataset.models import Role, utcnow
@@ -17,12 +18,18 @@ from dataset.wording import plural
 from webapp.auth import public, requires, sign_in, sign_out
 from webapp.forms import LoginForm
 from webapp.runtime import runtime
-from webapp.throttle import LoginCounters
+from webapp.throttle import LoginAttempt, Refusal, set_device_cookie
 
 bp = Blueprint("auth", __name__)
 # The cookie's note of when this browser logged in: once its session has ended, why it ended is told
 # from what happened to the account since (the session's own row is gone by then).
 SIGNED_IN_AT = "signed_in_at"
+REFUSED_PAGE = """<!doctype html>
+<html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
+<title>Log in · Illusion Studio</title><link rel="stylesheet" href="{css}"></head>
+<body><main><section class="card narrow"><h1>Log in</h1><p class="flash error" role="alert">{message}</p>
+<p><a href="{login}">Back to the login page</a></p></section></main></body></html>
+"""
 
 
 @bp.get("/healthz")
@@ -49,24 +56,34 @@ def login() -> ResponseReturnValue:
     form = LoginForm()
     if form.validate_on_submit():
         settings = runtime().settings
-        counters = LoginCounters.of(settings, form.name.data)
-        if (wait := counters.refused()) is not None:
-            minutes = plural(-(-wait // 60), "minute")
-            flash(f"Too many failed logins for this name from your address: try again in {minutes}.", "error")
-            return render_template("login.html", form=form), 429, {"Retry-After": str(wait)}
-        if (busy := counters.slow_down(settings)) is not None:
-            flash(f"Many logins are being slowed down just now: try again in {plural(busy, 'second')}.", "error")
-            return render_template("login.html", form=form), 429, {"Retry-After": str(busy)}
+        attempt = LoginAttempt.start(settings, form.name.data)
+        if (refusal := attempt.refusal(settings)) is not None:
+            return _refused(refusal)
         user = user_service.authenticate(g.db, form.name.data, form.password.data)
         if user is not None:
-            counters.succeeded()
+            attempt.succeeded()
             sign_in(user)
             session[SIGNED_IN_AT] = utcnow().isoformat()
-            return redirect(_safe_next(request.args.get("next")))
-        counters.failed()
+            response = redirect(_safe_next(request.args.get("next")))
+            set_device_cookie(response, settings, user.name, path=url_for("auth.login"))
+            return response
+        attempt.failed()
         flash("Wrong user name or password.", "error")
         return render_template("login.html", form=form), 401
     return render_template("login.html", form=form, ended=ended_reason())
+
+
+def _refused(refusal: Refusal) -> ResponseReturnValue:
+    """429 and a one-paragraph page, no template: a flood's refused logins come by the hundred a
+    second, and rendering the login form was a third of the cost of each."""
+    if refusal.busy:
+        message = f"Many logins are being slowed down just now: try again in {plural(refusal.retry_after, 'second')}."
+    else:
+        minutes = plural(-(-refusal.retry_after // 60), "minute")
+        message = f"Too many failed logins for this name from your address: try again in {minutes}."
+    page = REFUSED_PAGE.format(css=escape(url_for("static", filename="css/app.css")), message=escape(message),
+                               login=escape(request.full_path if request.query_string else request.path))
+    return page, 429, {"Retry-After": str(refusal.retry_after)}
 
 
 @bp.get("/login/ended")
