@@ -23,7 +23,7 @@ from model.presets import Config
 
 # (preset, device) → (base MB per rank, MB per megapixel of crop per GRU iteration).
 # lite/cpu: the fit of `illusion-studio bench memory --json` on the 2-core development machine
-# (2026-12-02: 526–1079 MB measured at 0.25–3.4 Mpx·iterations; README).
+# (2026-12-02: 526–1079 MB measured at 0.25–3.4 Mpx·iterations; docs/benchmarks.md).
 # paper: not runnable on this CPU; scaled from lite by the ratio of its GRU and feature widths
 # (activations dominate the per-pixel term) until a GPU machine measures it.
 # raft-stereo/cpu: the trainer's peaks at 128x256 (4, 8 iterations), 192x320 (8) and 256x384 (8, 12), 1.4–3.3 GB,

@@ -1,4 +1,4 @@
-"""The app behind Debian's nginx, configured as the README's deployment section shows: bodies buffered by
+"""The app behind Debian's nginx, configured as docs/security.md's deployment section shows: bodies buffered by
 the proxy (``proxy_request_buffering on``), the client's address passed on and trusted. Slow clients cost
 the app nothing there either, a login counts the client's own address, and an upload passes whole."""
 
@@ -29,7 +29,7 @@ pytestmark = [pytest.mark.serial, pytest.mark.skipif(NGINX is None, reason="Debi
                                                                        "(apt-get install nginx-light; .ci/run installs it)")]
 SLOW = 32
 
-# The README's deployment block, with the test's ports and folders filled in.
+# docs/security.md's deployment block, with the test's ports and folders filled in.
 SITE = """
 server {{
     listen 127.0.0.1:{port};

@@ -1,4 +1,4 @@
-"""The one-way house: what each package may import (DESIGN.md, README "Architecture").
+"""The one-way house: what each package may import (DESIGN.md, docs/architecture.md).
 
 ``model`` may import ``dataset`` and ``annotation``; ``annotation`` imports only
 ``dataset.formats``, ``dataset.filecache``, ``dataset.atomic`` and ``dataset.geometry``; nothing imports ``webapp`` but

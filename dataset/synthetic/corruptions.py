@@ -19,7 +19,7 @@ the way and pictures stay exactly as painted; it adds no noise. Here the warp is
 independent values, no waves, no power), new in every frame, over the whole image (illusions
 included, so the illusions carry the scene's own fooling, warped like everything else), mirrors
 fool it completely, nothing is opened, and per-pixel noise is added. The magnitude is calibrated
-to the realistic one's (mono-gt-align's non-illusion EPE on the same pairs: see the README).
+to the realistic one's (mono-gt-align's non-illusion EPE on the same pairs: see docs/benchmarks.md).
 """
 
 from __future__ import annotations

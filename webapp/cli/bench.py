@@ -1,4 +1,4 @@
-"""``illusion-studio bench …``: speed benchmarks (fixed seeds, figures for the README)."""
+"""``illusion-studio bench …``: speed benchmarks (fixed seeds, figures for docs/benchmarks.md)."""
 
 from __future__ import annotations
 

@@ -58,7 +58,7 @@ WHOLE = WholeNumber()
 @click.option("--nproc", default=1, show_default=True, type=click.IntRange(1),
               help="Trainer processes on this machine (DDP: gloo on CPU, NCCL on CUDA).")
 @click.option("--nnodes", default=1, show_default=True, type=click.IntRange(1, 1024),
-              help="Machines in the run; the others join with torchrun (see README).")
+              help="Machines in the run; the others join with torchrun (see docs/training.md).")
 @click.option("--rdzv-endpoint", help="HOST:PORT of the c10d rendezvous, for --nnodes > 1.")
 @click.option("--video", "video_ids", multiple=True, type=int, help="Only samples of this video id (repeatable).")
 @click.option("--illusion-type", "illusion_types", multiple=True, type=click.Choice([t.value for t in IllusionType]),
