@@ -173,7 +173,7 @@ class ModelConfig:
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """Optimisation, loss and augmentation settings (see MODEL_API.md)."""
+    """Optimisation, loss and augmentation settings (docs/training.md)."""
 
     steps: int = 2000
     batch_size: int = 2

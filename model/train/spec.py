@@ -1,4 +1,4 @@
-"""``RUN_DIR/run.json``: what the product asks the engine to train (MODEL_API.md, "Training engine")."""
+"""``RUN_DIR/run.json``: what the product asks the engine to train (docs/training.md)."""
 
 from __future__ import annotations
 

@@ -7,7 +7,7 @@ generated samples never do: their right views are warped from the rectified disp
 ``lite`` runs train on them through the real training job, from scratch or fine-tuned from the
 pre-trained trunk of ``bench pretrain`` (``webapp.benchmarks.pretrain``).
 
-The training data shows the test's conditions, not its seeds (protocol 2, issue 30): each capture
+The training data shows the test's conditions, not its seeds (protocol 2): each capture
 video is rendered at a baseline drawn for it from TRAIN_BASELINE_M, a range covering the held-out
 pairs' disparities (so its mirrors fool stereo as much as theirs do), and each generated sample's
 monocular input is an independent realistic draw (``dataset.synthetic.mono``'s estimator, another
@@ -82,7 +82,7 @@ from webapp.jobs import runs as run_control
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime
 
-PROTOCOL = 2  # 1: pairs at a baseline derived from the training data, a split per seed; 2: issue 30's
+PROTOCOL = 2  # 1: pairs at a baseline from the training data, a split per seed; 2: frozen held-out pairs, one split
 SIZE = (320, 192)  # W x H of every rendered frame
 FRAMES = 6  # per video
 GENERATED_VIDEOS = 6  # seeds 0..5 through the pipeline

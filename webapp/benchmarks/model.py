@@ -1,9 +1,9 @@
-"""The fusion model's budget (issue 10): the ``lite`` preset on one 1920×1080 pair, timed in a
+"""The fusion model's budget: the ``lite`` preset on one 1920×1080 pair, timed in a
 process of its own (peak resident memory: that child's own VmHWM), beside OpenCV SGBM
 on the same pair in the same run and RAFT-Stereo's own network (the ``raft-stereo`` preset at its
 published sizes and 32 test iterations, what an imported checkpoint runs); parameters per module;
-training steps/s at the lite crop. The lite VLM's EfficientNet-Lite0 eye (``vlm_eye``, lite's since
-issue 31): lite on the same pair with its VLM's patches instead, the eye's own stride-16 features at
+training steps/s at the lite crop. The lite VLM's EfficientNet-Lite0 eye (``vlm_eye``, lite's
+default): lite on the same pair with its VLM's patches instead, the eye's own stride-16 features at
 the size lite's VLM sees, and its parameters.
 
 The networks are randomly initialised: speed and memory do not depend on the weights.
@@ -33,7 +33,7 @@ if TYPE_CHECKING:
 BUDGET_S, BUDGET_MB = 3.0, 3072.0
 # lite's VLM with its image tokens from the EfficientNet-Lite0 eye (its random build: same size, no package needed)
 EYE = {"vlm_eye": "efficientnet-lite0", "vlm_eye_weights": "random"}
-# lite's VLM before issue 31: image tokens from patches it learns itself
+# lite's VLM before it had an eye: image tokens from patches it learns itself
 PATCHES = {"vlm_eye": "patches"}
 
 
