@@ -41,7 +41,7 @@ def runs() -> ResponseReturnValue:
                            roots=sorted(settings.dataset_roots), max_nproc=settings.train_max_nproc,
                            gpu=settings.train_devices == "cuda",
                            checkpoints=registry.named_checkpoints(g.db, settings.runs_dir),
-                           imported=[f"{registry.IMPORTED}:{n}" for n in registry.imported_names(settings.home)],
+                           imported=registry.imported_fits(settings.home),
                            preset_names=ALL_PRESETS,
                            suggested_crop=suggest_crop(load_preset("lite"), training.smallest_accepted_image(g.db)),
                            presets=_preset_values())
