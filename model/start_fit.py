@@ -7,6 +7,7 @@ file (``init_stereo``) fills a fusion preset's stereo branch only where the bran
 
 from __future__ import annotations
 
+import contextlib
 import json
 from collections.abc import Iterable
 from pathlib import Path
@@ -62,9 +63,12 @@ def imported_model(checkpoint: Path) -> ModelConfig | None:
             return Config.from_dict(json.loads(sidecar.read_text())["config"]).model
         from model.checkpoint import load_checkpoint  # torch: only for a file imported before sidecars
 
-        return Config.from_dict(load_checkpoint(checkpoint, label=Path(checkpoint).name)["config"]).model
+        config = Config.from_dict(load_checkpoint(checkpoint, label=Path(checkpoint).name)["config"])
     except (ImportError, OSError, ValueError, KeyError, TypeError):
         return None
+    with contextlib.suppress(OSError):  # read once: each form and launch after this one reads the sidecar
+        write_sidecar(checkpoint, config)
+    return config.model
 
 
 def _names(presets: Iterable[str]) -> str:
