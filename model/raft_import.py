@@ -215,7 +215,7 @@ def read_published(path: Path) -> dict[str, Any]:
 
 def import_file(path: Path, destination: Path) -> dict[str, Any]:
     """Convert the published file ``path`` and write it, as a checkpoint of this project's format, to
-    ``destination`` (atomically). Returns ``{"architecture", "keys_loaded", "tensors_in_file",
+    ``destination`` (atomically). Returns ``{"architecture", "config", "keys_loaded", "tensors_in_file",
     "duplicates", "unused"}``."""
     from model.checkpoint import save_checkpoint
 
@@ -224,7 +224,8 @@ def import_file(path: Path, destination: Path) -> dict[str, Any]:
     source = {"from": SOURCE, "file": Path(path).name, "sha256": digest, "architecture": conversion.architecture,
               "imported_at": datetime.now(UTC).isoformat(timespec="seconds")}
     save_checkpoint(destination, conversion.network, conversion.config, step=0, source=source)
-    return {"architecture": conversion.architecture, "keys_loaded": len(conversion.network.state_dict()),
+    return {"architecture": conversion.architecture, "config": conversion.config,
+            "keys_loaded": len(conversion.network.state_dict()),
             "tensors_in_file": conversion.tensors_in_file, "duplicates": conversion.duplicates,
             "unused": conversion.unused}
 

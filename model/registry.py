@@ -213,7 +213,20 @@ def import_checkpoint(settings: Any, file: Path, *, source: str, name: str | Non
         result = import_file(Path(file), destination)
     except ValueError as exc:  # not a checkpoint of that source, unreadable, or a pickle naming code
         raise InvalidInput(str(exc).splitlines()[0]) from None
-    return {"checkpoint": f"{IMPORTED}:{name}", **result}
+    from model.start_fit import fitting_presets, write_sidecar
+
+    write_sidecar(destination, result["config"])
+    return {"checkpoint": f"{IMPORTED}:{name}", **{k: v for k, v in result.items() if k != "config"},
+            "fits": fitting_presets(result["config"].model)}
+
+
+def imported_fits(home: Path) -> list[dict[str, Any]]:
+    """The imported checkpoints a form offers, each with the presets it fits as ``init`` and as
+    ``init_stereo`` (None where its config cannot be read here): ``{"name", "init", "init_stereo"}``."""
+    from model.start_fit import describe_fits, imported_model
+
+    return [{"name": f"{IMPORTED}:{n}", **describe_fits(imported_model(imported_path(Path(home), n)))}
+            for n in imported_names(Path(home))]
 
 
 def with_checkpoint_names(row: dict[str, Any]) -> dict[str, Any]:

@@ -58,6 +58,24 @@ def test_a_crop_too_large_for_the_data_is_refused_under_the_crop_field(browser, 
     page.context.close()
 
 
+def test_a_crop_the_estimate_cannot_read_is_marked_under_the_crop_field(browser, server: str) -> None:  # type: ignore[no-untyped-def]
+    page = browser.new_page()
+    login(page, server, "admin", PASSWORD)
+    page.goto(f"{server}/models")
+    form = page.locator("#launch")
+    estimate = page.locator("#launch-estimate")
+    form.locator("[name=crop]").fill("abc")
+    crop = form.locator("[data-error-for=crop]")
+    crop.wait_for(state="visible")
+    assert "expected HxW in pixels" in crop.inner_text()
+    assert estimate.inner_text() == "Estimated length: unknown until crop is corrected."
+    form.locator("[name=crop]").fill("64x96")
+    crop.wait_for(state="hidden")
+    page.wait_for_function("() => document.querySelector('#launch-estimate').textContent.includes('finished lite run')")
+    assert page.url == f"{server}/models"
+    page.context.close()
+
+
 @pytest.mark.timeout(900)  # the run's own waits allow 10 minutes on a loaded machine
 def test_admin_launches_a_run_and_sees_its_chart_grow(browser, server: str, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     page = browser.new_page()

@@ -16,6 +16,7 @@ from dataset.db import migrate, transaction
 from dataset.models import Role, RunState, TrainingRun, utcnow
 from dataset.services import training
 from dataset.services import users as user_service
+from model.presets import load_preset
 from tests.browser import login, page_with_errors, serving
 from tests.conftest import PASSWORD, make_settings
 from webapp.runtime import Runtime
@@ -35,7 +36,8 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, Path
     with transaction(rt.sessions) as s:
         for role in Role:
             user_service.create_user(s, role.value, role, PASSWORD)
-        run = TrainingRun(preset="lite", config={"train": {"steps": 10, "batch_size": 2, "crop": [64, 96]}},
+        config = load_preset("lite", {"train.steps": 10, "train.batch_size": 2, "train.crop": (64, 96)}).to_dict()
+        run = TrainingRun(preset="lite", config=config,
                           dataset_id="ab" * 32, dataset={"id": "ab" * 32, "items": []},
                           splits={"train": [1], "val": [2], "test": []}, launch={"data": {}}, state=RunState.succeeded,
                           started_at=utcnow() - timedelta(seconds=5), finished_at=utcnow())
@@ -64,11 +66,14 @@ def test_a_malformed_number_is_refused_under_its_field_and_the_estimate_uses_the
     form = page.locator("#launch")
     estimate = page.locator("#launch-estimate")
     page.wait_for_function("() => !document.getElementById('launch-estimate').textContent.includes('…')")
-    assert "unknown" in estimate.inner_text()
+    # The form starts at run 1's batch, crop and iterations: its estimate goes by run 1 from the start.
+    assert form.locator("[name=crop]").input_value() == "64x96"
+    assert "measured on run 1 at batch 2, 64×96" in estimate.inner_text(), estimate.inner_text()
     # empty fields name what the launch will take: the preset's values
     assert form.locator("[name=steps]").get_attribute("placeholder") == "2000 (lite's)"
     assert form.locator("[name=batch]").get_attribute("placeholder") == "2 (lite's)"
     for field, typed in (("steps", "1e"), ("batch", "--2")):
+        form.locator(f"[name={field}]").fill("")  # batch starts at run 1's
         form.locator(f"[name={field}]").press_sequentially(typed)
         form.locator(f"[name={field}]").press("Enter")
         note = form.locator(f"[data-error-for={field}]")
@@ -79,9 +84,11 @@ def test_a_malformed_number_is_refused_under_its_field_and_the_estimate_uses_the
     assert page.url == url + "/models"
     assert len(page.request.get(url + "/api/v1/runs").json()["items"]) == 1  # nothing launched
     form.locator("[name=steps]").fill("100")
-    form.locator("[name=crop]").fill("64x96")
-    page.wait_for_function("() => document.getElementById('launch-estimate').textContent.includes('about')")
-    assert "about 50 s" in estimate.inner_text() and "run 1" in estimate.inner_text()
+    page.wait_for_function("() => document.getElementById('launch-estimate').textContent.includes('about 50 s')")
+    assert "(100 steps × 0.5 s measured on run 1" in estimate.inner_text()
+    form.locator("[name=batch]").fill("4")  # twice the samples a step: twice as long, and said so
+    page.wait_for_function("() => document.getElementById('launch-estimate').textContent.includes('about 1 min 40 s')")
+    assert "scaled ×2 for batch, crop and iterations" in estimate.inner_text()
     assert errors == []
     page.close()
 

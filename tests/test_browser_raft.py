@@ -12,11 +12,14 @@ from dataset.models import Role
 from dataset.services import users as user_service
 from model import registry
 from model.checkpoint import save_checkpoint
+from model.network import FusionNetwork
+from model.presets import load_preset
 from model.raft_import import convert, strip_module
 from tests.browser import login, serving
 from tests.conftest import PASSWORD, make_settings
 from tests.raft_golden import fixture_state, load_fixture
 from tests.runs_data import add_accepted_samples
+from tests.test_init_stereo import LITE_WIDTHS
 from webapp.runtime import Runtime
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
@@ -35,6 +38,8 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     rt.close()
     conversion = convert(strip_module(fixture_state(load_fixture("default"))))
     save_checkpoint(registry.imported_path(settings.home, "rs"), conversion.network, conversion.config, step=0)
+    narrow = load_preset("raft-stereo", LITE_WIDTHS)  # a RAFT-Stereo network as narrow as lite's stereo branch
+    save_checkpoint(registry.imported_path(settings.home, "rs-lite"), FusionNetwork(narrow.model), narrow, step=0)
     with serving(settings.home, train_worker=True) as url:
         yield url
 
@@ -51,13 +56,21 @@ def test_a_run_started_from_an_imported_stereo_checkpoint_says_what_loaded(brows
     error = form.locator("[data-error-for=init_stereo]")
     error.wait_for(state="visible")
     assert "start it with init" in error.inner_text()
+    # The list says which presets each file's stereo branch fits, and a misfit is refused at launch.
+    options = form.locator("[name=init_stereo] option")
+    assert options.all_inner_texts()[1:] == ["imported:rs (fits paper)", "imported:rs-lite (fits lite)"]
+    assert "checkpoints import --from raft-stereo" in page.locator("#imported-note").inner_text()
     form.locator("[name=preset]").select_option("lite")
     for name, value in (("steps", "2"), ("batch", "1"), ("crop", "32x64"), ("iters", "2")):
         form.locator(f"[name={name}]").fill(value)
     form.locator("[name=devices]").select_option("cpu")
     form.locator("button[type=submit]").click()
+    page.wait_for_function("() => document.querySelector('[data-error-for=init_stereo]').textContent.includes('fits: paper')")
+    assert "does not fit lite's stereo branch" in error.inner_text() and page.url == f"{server}/models"
+    form.locator("[name=init_stereo]").select_option("imported:rs-lite")
+    form.locator("button[type=submit]").click()
     page.wait_for_url(f"{server}/models/runs/*")
-    assert "imported:rs" in page.locator("#init-summary").inner_text()
+    assert "imported:rs-lite" in page.locator("#init-summary").inner_text()
     page.wait_for_selector("#init-details:not([hidden])", timeout=300_000)
     assert "tensors from the file" in page.locator("#init-counts").inner_text()
     page.click("#init-details summary")

@@ -96,3 +96,31 @@ def test_samples_by_error_and_one_evaluated_sample(client, tokens, evaluated) ->
     assert f"/evaluations/1/samples/{worst}" in client.get(f"/samples/{worst}", headers=curator).get_data(as_text=True)
     report = client.get("/evaluations/1", headers=curator).get_data(as_text=True)
     assert 'id="paper-table"' in report and "<script" not in report.split("</main>")[0]  # no inline script
+
+
+def test_a_running_evaluation_says_how_far_it_is(client, runtime, tokens, evaluated) -> None:  # type: ignore[no-untyped-def]
+    from dataset.models import Job, JobState
+
+    curator = _auth(tokens, "curator")
+    launched = client.post("/api/v1/evaluations", json={"methods": ["sgbm"], "run": 1}, headers=curator)
+    evaluation_id = launched.json["id"]
+    html = client.get(f"/evaluations/{evaluation_id}", headers=curator).get_data(as_text=True)
+    assert "No report yet (the job is queued)." in html
+    with transaction(runtime.sessions) as s:
+        job = s.get(Job, launched.json["job"])
+        job.state, job.progress = JobState.running, 0.25
+    html = client.get(f"/evaluations/{evaluation_id}", headers=curator).get_data(as_text=True)
+    assert "No report yet (the job is running, 25% done" in html and ", )" not in html
+
+
+def test_a_samples_provenance_reads_as_text(client, runtime, tokens, evaluated) -> None:  # type: ignore[no-untyped-def]
+    from dataset.models import Sample
+
+    sample_id = evaluated[1][0]
+    with transaction(runtime.sessions) as s:
+        sample = s.get(Sample, sample_id)
+        sample.provenance = {**(sample.provenance or {}),
+                             "pair_types": {"illusion_01": "mirror", "illusion_00": "picture"}}
+    html = client.get(f"/samples/{sample_id}", headers=_auth(tokens, "curator")).get_data(as_text=True)
+    assert "<dt>pair_types</dt><dd>illusion_00: picture, illusion_01: mirror</dd>" in html
+    assert "{&#39;" not in html and "{'" not in html

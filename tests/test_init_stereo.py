@@ -88,6 +88,11 @@ def test_engine_starts_the_stereo_branch_from_an_imported_checkpoint(native: Pat
     assert shown["loaded_keys"] == record["loaded"] and str(tmp_path) not in json.dumps(shown)
 
 
+# A RAFT-Stereo network as narrow as lite's stereo branch: a file whose every stereo tensor fits lite.
+LITE_WIDTHS = {"n_downsample": 3, "encoder_dims": [16, 32, 48], "encoder_blocks": [0, 1, 1], "stem_kernel": 3,
+               "feature_dim": 48, "hidden_dims": [32, 32, 32]}
+
+
 def test_a_launch_names_init_stereo_and_the_run_says_what_it_started_from(client, tokens, runtime) -> None:  # type: ignore[no-untyped-def]
     from dataset.db import transaction
     from model import registry
@@ -104,12 +109,19 @@ def test_a_launch_names_init_stereo_and_the_run_says_what_it_started_from(client
                                ({"init": "99:best"}, "init", "no run 99")):
         refused = client.post("/api/v1/runs", json={"preset": "lite", **SHORT, **body}, headers=headers)
         assert refused.status_code == 400 and refused.json["field"] == field and words in refused.json["error"], refused.json
-    launched = client.post("/api/v1/runs", json={"preset": "lite", **SHORT, "init_stereo": "imported:rs"}, headers=headers)
+    # A file whose widths are not lite's stereo branch's is refused at launch, naming the preset it fits.
+    misfit = client.post("/api/v1/runs", json={"preset": "lite", **SHORT, "init_stereo": "imported:rs"}, headers=headers)
+    assert misfit.status_code == 400 and misfit.json["field"] == "init_stereo", misfit.json
+    assert "n_downsample" in misfit.json["error"] and "(it fits: paper)" in misfit.json["error"]
+    narrow = load_preset("raft-stereo", LITE_WIDTHS)
+    save_checkpoint(registry.imported_path(runtime.settings.home, "rs-lite"), FusionNetwork(narrow.model), narrow, step=0)
+    launched = client.post("/api/v1/runs", json={"preset": "lite", **SHORT, "init_stereo": "imported:rs-lite"},
+                           headers=headers)
     assert launched.status_code == 202, launched.json
     run = launched.json
-    assert run["launch"]["init_stereo"] == "imported:rs" and run["init"] == {"source": "imported:rs"}
+    assert run["launch"]["init_stereo"] == "imported:rs-lite" and run["init"] == {"source": "imported:rs-lite"}
     doc = json.loads((runtime.settings.home / run["run_dir"] / "run.json").read_text())
-    assert doc["init_stereo"] == str(registry.imported_path(runtime.settings.home, "rs"))
+    assert doc["init_stereo"] == str(registry.imported_path(runtime.settings.home, "rs-lite"))
     # The engine's record, once it has started, is what the run's JSON counts and lists.
     (runtime.settings.home / run["run_dir"] / INIT_FILE).write_text(
         json.dumps({"loaded": ["a", "b"], "fresh": ["c"], "unused": []}))

@@ -86,6 +86,59 @@ def test_the_command_line_refuses_it_too(settings: Settings) -> None:
     assert result.exit_code != 0 and "depth_model_path" in result.output, result.output
 
 
+# --- at launch: the start checkpoint's recorded model config --------------------------------------
+
+def _finished_lite_run(runtime: Runtime) -> int:
+    """A run recorded with lite's whole config and a best checkpoint (its weights are not read)."""
+    run_id = _queued_run(runtime)
+    write_checkpoint(training.run_dir(runtime.settings.runs_dir, run_id) / "checkpoints" / "best.pt", 4)
+    with transaction(runtime.sessions) as s:
+        run = s.get(TrainingRun, run_id)
+        run.config, run.best_step = load_preset("lite").to_dict(), 4
+    return run_id
+
+
+def test_a_start_checkpoint_of_another_model_config_is_refused_at_launch(client, tokens, runtime, samples) -> None:  # type: ignore[no-untyped-def]
+    lite_run = _finished_lite_run(runtime)
+    answer = client.post("/api/v1/runs", json={**SHORT, "preset": "raft-stereo", "crop": "64x96",
+                                               "init": f"{lite_run}:best"}, headers=bearer(tokens, "admin"))
+    assert answer.status_code == 400 and answer.json["field"] == "init", answer.json
+    said = answer.json["error"]
+    assert said.startswith(f"init: run {lite_run} · best.pt cannot start a raft-stereo run: its model config differs")
+    assert "n_downsample, encoder_dims" in said and "(it fits: lite)" in said
+    with runtime.sessions() as s:  # nothing was created or queued
+        assert s.query(TrainingRun).count() == 1
+    same = client.post("/api/v1/runs", json={**SHORT, "init": f"{lite_run}:best"}, headers=bearer(tokens, "admin"))
+    assert same.status_code == 202, same.json
+
+
+def test_an_imported_file_is_offered_with_the_presets_it_fits_and_refused_for_others(client, tokens, runtime, samples) -> None:  # type: ignore[no-untyped-def]
+    from model import registry
+    from model.start_fit import write_sidecar
+
+    raft = load_preset("raft-stereo")
+    path = registry.imported_path(runtime.settings.home, "rs")
+    write_checkpoint(path, 0)  # the launch reads the recorded config beside it, never its weights
+    write_sidecar(path, raft)
+    refused = client.post("/api/v1/runs", json={**SHORT, "init": "imported:rs"}, headers=bearer(tokens, "admin"))
+    assert refused.status_code == 400 and refused.json["field"] == "init" and "(it fits: raft-stereo)" in refused.json["error"]
+    stereo = client.post("/api/v1/runs", json={**SHORT, "init_stereo": "imported:rs"}, headers=bearer(tokens, "admin"))
+    assert stereo.status_code == 400 and stereo.json["field"] == "init_stereo", stereo.json
+    assert "does not fit lite's stereo branch" in stereo.json["error"] and "(it fits: paper)" in stereo.json["error"]
+    page = client.get("/models", headers=bearer(tokens, "admin")).get_data(as_text=True)
+    assert '<option value="imported:rs">imported:rs (fits raft-stereo)</option>' in page
+    assert '<option value="imported:rs">imported:rs (fits paper)</option>' in page
+    assert "illusion-studio checkpoints import --from raft-stereo FILE" in page
+
+
+def test_the_command_line_refuses_a_start_that_does_not_fit(runtime: Runtime, samples: list[int]) -> None:
+    lite_run = _finished_lite_run(runtime)
+    result = CliRunner().invoke(main, ["--data-dir", str(runtime.settings.home), "train", "--preset", "raft-stereo",
+                                       "--crop", "64x96", "--steps", "2", "--init", f"{lite_run}:best"])
+    assert result.exit_code != 0 and "its model config differs from raft-stereo's in n_downsample" in result.output, \
+        result.output
+
+
 # --- on the train worker, before torchrun ------------------------------------------------------
 
 def _claim(runtime: Runtime, job_id: int, **worker_settings: Any) -> dict[str, Any]:

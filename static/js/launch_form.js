@@ -15,6 +15,7 @@ function noteFor(form, field) {
 
 // `reason` under the field's note; the field marked and brought into view.
 function refuse(note, reason) {
+  delete note.dataset.fromEstimate;  // the launch's own refusal: the estimate's next answer leaves it
   note.textContent = reason;
   note.hidden = false;
   const input = note.closest("label")?.querySelector("input, select");

@@ -1,7 +1,7 @@
 // The runs table (refreshed every two seconds, rows pickable for comparison) and the admins'
 // launch form, which posts to the API and opens the new run's page.
 import { api, el, poll } from "./api.js";
-import { LIVE, duration, fixed, runUrl } from "./runs.js";
+import { duration, fixed, runUrl } from "./runs.js";
 import { keyboardHelp } from "./help.js";
 import { launch, numberOrNull } from "./launch_form.js";
 
@@ -82,48 +82,44 @@ function showPresetValues() {
   }
 }
 
-const cropText = (text) => text.replace(/\s/g, "").replace(/[X×]/, "x");
-const median = (values) => {
-  const sorted = [...values].sort((a, b) => a - b);
-  const mid = sorted.length >> 1;
-  return sorted.length % 2 ? sorted[mid] : (sorted[mid - 1] + sorted[mid]) / 2;
-};
-
-// A finished run's median step time in seconds (batch / samples per s over its curve's points), kept
-// once known: what it was does not change.
-const stepTimes = new Map();
-async function medianStepTime(runId) {
-  if (!stepTimes.has(runId)) {
-    const url = runUrl(root.dataset.runApi, runId);
-    const [run, points] = await Promise.all([api(url), api(`${url}/metrics?after=-1&after_val=2147483647`)]);
-    const batch = run.config?.train?.batch_size;
-    const times = points.step.filter((p) => p.samples_per_s > 0).map((p) => batch / p.samples_per_s);
-    const crop = run.config?.train?.crop;
-    stepTimes.set(runId, { crop: crop ? crop.join("x") : null, seconds: batch && times.length ? median(times) : null });
-  }
-  return stepTimes.get(runId);
-}
-
-// "about 3 min 20 s" from the median step time of the newest run with the same preset and crop, else unknown.
+// The estimate from the API (the nearest finished run of the preset, scaled to this batch, crop and
+// iterations); a field it refuses is marked under that field, as a launch would be.
 let asked = 0;
 async function showEstimate() {
   const ask = ++asked;
-  const name = form.elements.preset.value;
-  const steps = numberOrNull(form.elements.steps) ?? presets[name]?.steps;
-  const crop = cropText(form.elements.crop.value) || presets[name]?.crop;
-  let text = "unknown: type the steps and the crop to compare with earlier runs";
-  if (typeof steps === "number" && crop) {
-    text = `unknown: no earlier ${name} run with crop ${crop} has step times`;
-    const { items } = await api(root.dataset.src);
-    for (const run of items.filter((r) => r.preset === name && r.step > 0 && !LIVE.has(r.state))) {
-      const { crop: runCrop, seconds } = await medianStepTime(run.run);
-      if (runCrop !== crop || seconds == null) continue;
-      text = `about ${duration(seconds * steps)} (${steps} steps × ${seconds.toFixed(2)} s, the median step of run ${run.run}, ` +
-        `same preset and crop)`;
-      break;
+  const note = (field) => form.querySelector(`[data-error-for="${CSS.escape(field)}"]`);
+  for (const field of ESTIMATE_FIELDS) {
+    const n = note(field);
+    if (n?.dataset.fromEstimate) { n.hidden = true; delete n.dataset.fromEstimate; }
+  }
+  let text;
+  try {
+    text = (await api(form.dataset.estimate, { method: "POST", body: estimateBody() })).text;
+  } catch (err) {
+    if (ask !== asked) return;
+    const field = err.field?.split(".")[0];
+    const n = field ? note(field) : null;
+    if (n) {
+      n.textContent = err.reason ?? err.message;
+      n.hidden = false;
+      n.dataset.fromEstimate = "1";
     }
+    text = field ? `unknown until ${field} is corrected` : `unknown (${err.message})`;
   }
   if (ask === asked) estimate.textContent = `Estimated length: ${text}.`;
+}
+
+// What a step's time depends on, as the launch would send it.
+const ESTIMATE_FIELDS = ["preset", "steps", "batch", "crop", "iters"];
+function estimateBody() {
+  const f = form.elements;
+  const body = { preset: f.preset.value };
+  for (const name of ["steps", "batch", "iters"]) {
+    const value = numberOrNull(f[name]);
+    if (value !== null) body[name] = value;
+  }
+  if (f.crop.value.trim()) body.crop = f.crop.value.trim();
+  return body;
 }
 
 if (form) {
@@ -133,7 +129,7 @@ if (form) {
   };
   for (const radio of form.elements.source) radio.addEventListener("change", showSource);
   form.elements.preset.addEventListener("change", showPresetValues);
-  for (const name of ["preset", "steps", "crop"]) {
+  for (const name of ESTIMATE_FIELDS) {
     form.elements[name].addEventListener("input", () => showEstimate().catch(console.warn));
   }
   showPresetValues();
@@ -149,8 +145,9 @@ keyboardHelp([], {
   note: "Tick two or more runs to compare their curves. Launch fields left empty take the preset's values; a " +
     "refused launch names its field under it (a crop must fit the smallest image of the data and the machine's " +
     "memory; text that is not a number is refused too). The estimate above Launch is the steps times the median " +
-    "step time of the newest finished run with the same preset and crop. Start from a run's best or last " +
-    "checkpoint to fine-tune.",
+    "step time of the finished run of the same preset nearest in batch, crop and iterations, scaled by " +
+    "batch × pixels × iterations. Batch, crop and iterations start at the newest finished run's. Start from a " +
+    "run's best or last checkpoint to fine-tune; an imported checkpoint says which presets it fits.",
 });
 
 poll(refresh, 2000);

@@ -45,8 +45,10 @@ function showState(state) {
   }
   const note = $("decision-note");
   if (note) {
-    note.textContent = { accepted: "Accepted: in the dataset. Reject takes it out and sends its frame back to the annotators.",
-                         rejected: "Rejected: its frame went back to the annotators; it comes back as a new sample." }[state] ?? "";
+    // The badge names the state: the note says only what it means.
+    note.textContent = { accepted: "In the dataset. Reject takes it out and sends its frame back to the annotators.",
+                         rejected: "Its frame went back to the annotators; it comes back as a new sample." }[state] ?? "";
+    note.hidden = !note.textContent;
   }
 }
 

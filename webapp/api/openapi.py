@@ -209,6 +209,10 @@ def openapi_document() -> dict[str, Any]:
                 "post": _op("Launch a training run on the train queue; an empty selection is a 400 with the reason",
                             "admin", body="RunLaunch", ok="202", schema="Run", errors=_QUEUE_DOWN),
             },
+            "/runs/estimate": {"post": _op(
+                "How long a launch would train: the nearest finished run's measured step time of the same preset, "
+                "scaled by batch × crop pixels × iterations (nothing is launched)", "admin", body="RunLaunch",
+                schema="RunEstimate")},
             "/runs/{run_id}": {"get": _op("One run with config, dataset version, splits and checkpoints", "curator",
                                           params=[_RUN_ID], schema="Run")},
             "/runs/{run_id}/metrics": {"get": _op("Curve points after step `after` (live charts)", "curator",
@@ -382,6 +386,11 @@ def openapi_document() -> dict[str, Any]:
                     "reason": {"type": ["string", "null"]}, "current": {"type": "boolean"}}},
                 "RunList": {"type": "object", "properties": {"items": {"type": "array", "items": _ref("Run")},
                                                              "current": {"type": ["object", "null"]}}},
+                "RunEstimate": {"type": "object", "properties": {
+                    "seconds": {"type": ["number", "null"], "description": "null: no finished run of the preset measured one"},
+                    "text": {"type": "string", "description": "the estimate and how it was made, in words"},
+                    "run": {"type": ["integer", "null"], "description": "the measured run it scales"},
+                    "scale": {"type": ["number", "null"], "description": "batch × pixels × iterations, over the run's"}}},
                 "RunMetrics": {"type": "object", "properties": {
                     "run": {"type": "integer"},
                     "step": {"type": "array", "items": {"type": "object", "description": "step, loss, lr, samples_per_s"}},

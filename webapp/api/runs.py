@@ -11,7 +11,7 @@ from flask_login import current_user
 
 from dataset.models import Role, User
 from dataset.services import training
-from model import registry
+from model import registry, run_length
 from model.launch import FieldError, RunLaunch, validate
 from webapp.api.blueprint import api, id_list_arg, int_arg, json_body
 from webapp.auth import requires
@@ -48,6 +48,13 @@ def launch_run() -> ResponseReturnValue:
     run = run_control.launch_request(runtime(), g.db, request_, _user())
     g.db.commit()
     return _run_json(run.id), 202
+
+
+@api.post("/runs/estimate")
+@requires(Role.admin)
+def estimate_run() -> ResponseReturnValue:
+    """Body: :class:`model.launch.RunLaunch`, validated as a launch is (a wrong field is its 400)."""
+    return run_length.launch_estimate(g.db, validate(RunLaunch, json_body(), runtime().settings))
 
 
 @api.get("/runs/<int:run_id>")

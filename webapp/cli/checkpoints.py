@@ -37,3 +37,6 @@ def import_checkpoint(state: CliState, file: Path, source: str, name: str | None
                f"{'slow-fast GRU, ' if arch['slow_fast_gru'] else ''}{result['keys_loaded']} tensors loaded "
                f"({result['tensors_in_file']} in the file: {result['duplicates']} duplicates, "
                f"{len(result['unused'])} never used by RAFT-Stereo at this architecture)")
+    fits = result["fits"]
+    click.echo(f"fits: start from it (--init) with preset {', '.join(fits['init']) or 'none'}; "
+               f"its stereo branch (--init-stereo) with {', '.join(fits['init_stereo']) or 'none'}")

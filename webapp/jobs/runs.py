@@ -21,7 +21,8 @@ from model import launcher, registry
 from model.fit import check_fit, train_device
 from model.jobs import resolve_config
 from model.launch import FieldError, RunLaunch, backbone_dirs, checkpoint_text
-from model.presets import Config
+from model.presets import Config, ModelConfig
+from model.start_fit import check_init, check_init_stereo, imported_model
 from model.train.spec import with_backbones
 
 if TYPE_CHECKING:
@@ -80,6 +81,14 @@ def launch(rt: Runtime, session: Session, *, preset: str, overrides: dict[str, A
     # them for the memory estimate, and each train worker's own for the engine.
     resolved = Config.from_dict(config)
     resolved = with_backbones(resolved, backbone_dirs(resolved, rt.settings))
+    # A start the train worker would refuse is refused here, before the run waits in the queue for it.
+    if init is not None:
+        check_init(_recorded_model(session, init), resolved, init.label if isinstance(init, registry.CheckpointFile)
+                   else init.name)
+    elif launch.init_checkpoint is not None:
+        check_init(imported_model(Path(launch.init_checkpoint)), resolved, launch.init_label or "the checkpoint")
+    if launch.init_stereo is not None:
+        check_init_stereo(imported_model(Path(launch.init_stereo)), resolved, launch.init_stereo_label or "the file")
     version = training.pin_selection(session, rt.media, selection)
     check_fit(resolved, nproc=launch.nproc, device=train_device(launch.devices, rt.settings),
               memory_gb=rt.settings.train_memory_gb, smallest_image=training.smallest_image(session, version, selection))
@@ -167,6 +176,17 @@ def _start_from(rt: Runtime, session: Session, name: str, *, field: str,
     except (NotFound, InvalidInput) as exc:
         raise FieldError(field, str(exc)) from None
     return _checkpoint_of(rt, run, name.split(":", 1)[1], field=field)
+
+
+def _recorded_model(session: Session, init: registry.CheckpointFile | registry.ResolvedCheckpoint) -> ModelConfig | None:
+    """The model config a start checkpoint was trained with: its run's (every checkpoint of a run
+    records the run's config), or an imported file's recorded one."""
+    if isinstance(init, registry.CheckpointFile):
+        try:
+            return Config.from_dict(training.get_run(session, init.run).config).model
+        except (NotFound, KeyError, ValueError, TypeError):  # a run of an older config: the worker checks the file
+            return None
+    return imported_model(init.path)
 
 
 def _checkpoint_of(rt: Runtime, run: TrainingRun, which: str, *, field: str) -> registry.CheckpointFile:

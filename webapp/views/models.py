@@ -17,7 +17,7 @@ from dataset.contained import open_contained
 from dataset.models import IllusionType, Role, Video
 from dataset.readers import READER_FORMATS
 from dataset.services import run_logs, training
-from model import registry
+from model import registry, run_length
 from model.fit import suggest_crop
 from model.presets import ALL_PRESETS, load_preset
 from webapp.api.blueprint import id_list_arg, int_arg
@@ -41,10 +41,10 @@ def runs() -> ResponseReturnValue:
                            roots=sorted(settings.dataset_roots), max_nproc=settings.train_max_nproc,
                            gpu=settings.train_devices == "cuda",
                            checkpoints=registry.named_checkpoints(g.db, settings.runs_dir),
-                           imported=[f"{registry.IMPORTED}:{n}" for n in registry.imported_names(settings.home)],
+                           imported=registry.imported_fits(settings.home),
                            preset_names=ALL_PRESETS,
                            suggested_crop=suggest_crop(load_preset("lite"), training.smallest_accepted_image(g.db)),
-                           presets=_preset_values())
+                           presets=_preset_values(), start=run_length.latest_finished_size(g.db))
 
 
 def _preset_values() -> dict[str, dict[str, Any]]:
