@@ -19,6 +19,20 @@ from dataset.services import users as user_service
 from dataset.settings import Settings, load_settings
 from webapp.runtime import Runtime
 
+# Fixtures shared between test modules live in plugin modules, never imported by the tests:
+# - tests.browser: one browser per test session, for every browser test module (a fixture defined in
+#   two modules would start two Playwright loops, and the second refuses to run);
+# - tests.workers: real worker processes over a real queue (``queue_settings``, ``rt``, ``start_worker``);
+# - tests.fixtures.*: workspaces and data shared by several modules.
+pytest_plugins = [
+    "tests.browser",
+    "tests.workers",
+    "tests.fixtures.workspaces",
+    "tests.fixtures.annotate",
+    "tests.fixtures.login_flood",
+    "tests.fixtures.runs",
+]
+
 TEST_DATABASE_URL = os.environ.get("TEST_DATABASE_URL", "")
 TEST_REDIS_URL = os.environ.get("TEST_REDIS_URL", "")
 PASSWORD = "correct-horse-battery"
@@ -133,7 +147,3 @@ def login(client, name: str, password: str = PASSWORD):  # type: ignore[no-untyp
     token = csrf_from(client.get("/login").get_data(as_text=True))
     return client.post("/login", data={"name": name, "password": password, "csrf_token": token})
 
-
-# One browser per test session, for every browser test module (a fixture defined in two modules
-# would start two Playwright loops, and the second refuses to run).
-from tests.browser import browser  # noqa: E402, F401
