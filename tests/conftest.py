@@ -6,8 +6,10 @@ from __future__ import annotations
 import functools
 import os
 import re
+import sqlite3
 import uuid
 from collections.abc import Iterator
+from contextlib import closing
 from pathlib import Path
 
 import pytest
@@ -18,6 +20,20 @@ from dataset.models import Role
 from dataset.services import users as user_service
 from dataset.settings import Settings, load_settings
 from webapp.runtime import Runtime
+
+# Fixtures shared between test modules live in plugin modules, never imported by the tests:
+# - tests.browser: one browser per test session, for every browser test module (a fixture defined in
+#   two modules would start two Playwright loops, and the second refuses to run);
+# - tests.workers: real worker processes over a real queue (``queue_settings``, ``rt``, ``start_worker``);
+# - tests.fixtures.*: workspaces and data shared by several modules.
+pytest_plugins = [
+    "tests.browser",
+    "tests.workers",
+    "tests.fixtures.workspaces",
+    "tests.fixtures.annotate",
+    "tests.fixtures.login_flood",
+    "tests.fixtures.runs",
+]
 
 TEST_DATABASE_URL = os.environ.get("TEST_DATABASE_URL", "")
 TEST_REDIS_URL = os.environ.get("TEST_REDIS_URL", "")
@@ -83,10 +99,32 @@ def make_settings(home: Path, **overrides: object) -> Settings:
     return load_settings(home, **overrides)
 
 
+@pytest.fixture(scope="session")
+def migrated_sqlite(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """An empty SQLite database migrated to the newest schema once per test process, for
+    :func:`migrate_copying` to copy (a copy takes a millisecond, a migration most of a second)."""
+    home = tmp_path_factory.mktemp("migrated")
+    migrate(f"{SQLITE_PREFIX}{home / 'template.db'}")
+    return home / "template.db"
+
+
+SQLITE_PREFIX = "sqlite:///"
+
+
+def migrate_copying(url: str, template: Path) -> None:
+    """:func:`migrate` the database at ``url``: a SQLite file not there yet becomes a copy of ``template``,
+    made by SQLite's backup API (consistent whatever the template's WAL still holds)."""
+    if url.startswith(SQLITE_PREFIX) and not Path(url.removeprefix(SQLITE_PREFIX)).exists():
+        with closing(sqlite3.connect(template)) as src, closing(sqlite3.connect(url.removeprefix(SQLITE_PREFIX))) as dst:
+            src.backup(dst)
+    else:
+        migrate(url)
+
+
 @pytest.fixture
-def settings(tmp_path: Path) -> Settings:
+def settings(tmp_path: Path, migrated_sqlite: Path) -> Settings:
     s = make_settings(tmp_path / "ws")
-    migrate(s.database_url)
+    migrate_copying(s.database_url, migrated_sqlite)
     return s
 
 
@@ -133,7 +171,3 @@ def login(client, name: str, password: str = PASSWORD):  # type: ignore[no-untyp
     token = csrf_from(client.get("/login").get_data(as_text=True))
     return client.post("/login", data={"name": name, "password": password, "csrf_token": token})
 
-
-# One browser per test session, for every browser test module (a fixture defined in two modules
-# would start two Playwright loops, and the second refuses to run).
-from tests.browser import browser  # noqa: E402, F401

@@ -16,25 +16,10 @@ from dataset.db import transaction
 from dataset.formats import mask_to_rle
 from dataset.models import Annotation, AuditEntry, Frame, FrameState, Job
 from dataset.services import jobs as job_service
-from dataset.services.ingest import ingest_params
-from dataset.synthetic import write_synthetic_dataset
 from tests.conftest import PASSWORD
+from tests.fixtures.annotate import H, W
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime
-
-W, H = 320, 180
-
-
-@pytest.fixture
-def scene(runtime: Runtime, tmp_path: Path) -> Path:
-    """Four approved synthetic frames."""
-    [path] = write_synthetic_dataset(tmp_path / "s", videos=1, seed=6, n_frames=4, width=W, height=H)
-    with transaction(runtime.sessions) as s:
-        runtime.submit(s, "ingest", ingest_params(str(path), fps=None, dedup_hamming=None), None)
-    job_service.run_queued_jobs(HANDLERS, runtime)
-    with transaction(runtime.sessions) as s:
-        s.execute(update(Frame).values(state=FrameState.approved))
-    return path
 
 
 def truth(scene: Path, index: int, name: str) -> np.ndarray:

@@ -22,7 +22,6 @@ from dataset.readers.version import (
 )
 from dataset.samples import load_outputs, store_outputs
 from dataset.services.errors import InvalidInput
-from tests.test_export_native import source as source  # the pipeline's samples: 5 synthesized (3 videos), 1 capture
 from webapp.runtime import Runtime
 
 

@@ -30,8 +30,9 @@ from dataset.db import migrate
 from dataset.services import users as user_service
 from dataset.settings import Settings
 from tests.conftest import PASSWORD, TEST_REDIS_URL, csrf_from, make_settings
+from tests.fixtures.login_flood import FLOOD, MAX_S, Served, serve
 from tests.flood import READY
-from tests.test_login_flood import FLOOD, MAX_S, Served, guess_at_once, login_token, post_login, serve, served  # noqa: F401 (served: a fixture)
+from tests.test_login_flood import guess_at_once, login_token, post_login
 from webapp import throttle
 from webapp.runtime import Runtime, runtime
 

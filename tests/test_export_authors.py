@@ -17,9 +17,7 @@ from dataset.export import HANDLERS as EXPORT_HANDLERS
 from dataset.formats import read_pfm, write_pfm
 from dataset.models import Annotation, Frame, JobState, Sample, SourceKind, Video
 from dataset.samples import load_outputs
-from tests.test_export_native import counts, export, import_, tree
-from tests.test_export_native import fresh as fresh  # shared fixtures: an empty workspace,
-from tests.test_export_native import source as source  # and the source workspace
+from tests.fixtures.workspaces import counts, export, import_, tree
 from webapp.cli import main
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime

@@ -1,15 +1,12 @@
 """Native export/import: byte-identical round trip, idempotent import, splits by video, clear errors, CLI.
 
-The source workspace is built by the real pipeline (synthetic scenes → ingest → annotation from the
-true masks → the generate job → curator accepts), plus one real-capture sample written through
-``store_outputs`` (a capture importer is not part of this module).
+The ``source`` and ``fresh`` workspaces come from tests/fixtures/workspaces.py.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -18,145 +15,14 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from pycocotools.coco import COCO
-from sqlalchemy import func, select, update
+from sqlalchemy import select
 
-from dataset.db import migrate, transaction
-from dataset.export import HANDLERS as EXPORT_HANDLERS
-from dataset.export import LayoutError, export_params, import_params, parse_split_spec, split_of
+from dataset.export import LayoutError, export_params, parse_split_spec, split_of
 from dataset.formats import read_mask
-from dataset.models import (
-    Annotation,
-    Frame,
-    FrameState,
-    Job,
-    JobState,
-    Region,
-    Role,
-    Sample,
-    SampleState,
-    SourceKind,
-    User,
-    Video,
-)
-from dataset.samples import store_outputs
-from dataset.services import jobs as job_service
-from dataset.services import users as user_service
-from dataset.services.demo import seed_reviews_and_annotations
-from dataset.services.ingest import ingest_params
-from dataset.services.sample_review import review_sample
-from dataset.synthetic import write_synthetic_dataset
-from tests.conftest import make_settings
+from dataset.models import Job, JobState
+from tests.fixtures.workspaces import SEED, SPLIT, counts, export, import_, run_job, tree
 from webapp.cli import main
-from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime
-
-SPLIT = "train=0.5,test=0.5"
-SEED = 2  # puts 3 samples in each split
-CAPTURE_SIZE = (64, 96)  # (H, W): the synthetic frames' size, so batches collate
-
-
-def new_runtime(home: Path) -> Runtime:
-    settings = make_settings(home)
-    migrate(settings.database_url)
-    return Runtime(settings)
-
-
-def build_source(home: Path) -> Runtime:
-    """A workspace with 5 accepted synthesized samples (3 videos), 1 only generated, 1 accepted capture."""
-    rt = new_runtime(home)
-    scenes = write_synthetic_dataset(home.parent / "scenes", videos=3, seed=0, n_frames=2, width=96, height=64)
-    with transaction(rt.sessions) as s:
-        for scene in scenes:
-            job_service.create_job(s, "ingest", ingest_params(str(scene), fps=None, dedup_hamming=None), None)
-    run_all(rt)
-    with transaction(rt.sessions) as s:
-        s.execute(update(Frame).values(state=FrameState.prefiltered))
-        curator = user_service.create_user(s, "cur", Role.curator, "long-enough-pw")
-        annotator = user_service.create_user(s, "ann", Role.annotator, "long-enough-pw")
-        for frame_id in seed_reviews_and_annotations(s, rt.media, curator, annotator):
-            job_service.create_job(s, "generate", {"frame_id": frame_id}, None)
-    run_all(rt)
-    with transaction(rt.sessions) as s:
-        curator = s.scalar(select(User).where(User.name == "cur"))
-        ids = s.scalars(select(Sample.id).order_by(Sample.id)).all()
-        for sample_id in ids[:-1]:
-            review_sample(s, sample_id, curator, "accept")
-    add_capture(rt)
-    return rt
-
-
-def add_capture(rt: Runtime) -> None:
-    """A real-capture sample shaped like the capture import's: measured disparity with holes (NaN), a
-    valid mask, an illusion mask, no annotation."""
-    h, w = CAPTURE_SIZE
-    rng = np.random.default_rng(7)
-    disparity = np.linspace(20, 40, h * w, dtype=np.float32).reshape(h, w)
-    disparity[:6, :10] = np.nan
-    illusion = np.zeros((h, w), bool)
-    illusion[10:30, 20:44] = True
-    files = store_outputs(rt.media, {
-        "left": rng.integers(0, 255, (h, w, 3), dtype=np.uint8), "right": rng.integers(0, 255, (h, w, 3), dtype=np.uint8),
-        "disparity": disparity, "valid": np.isfinite(disparity), "masks": {"illusion_00": illusion},
-    })
-    with transaction(rt.sessions) as s:
-        video = Video(name="lab scene/tv", source_kind=SourceKind.real_capture, illusion_types=[],
-                      content_sha256="c" * 64, fps=15.0, width=w, height=h, meta={"baseline_m": 0.0628167})
-        s.add(video)
-        s.flush()
-        frame = Frame(video_id=video.id, index=3, time_s=0.2, width=w, height=h, content_sha256=Path(files["left"]).stem,
-                      media_key=files["left"], state=FrameState.accepted)
-        s.add(frame)
-        s.flush()
-        s.add(Sample(frame_id=frame.id, state=SampleState.accepted, files=files, params={"scale": 1.0},
-                     provenance={"source": "capture", "capture_stem": "000003"}, qa={"flags": []}))
-
-
-def run_all(rt: Runtime) -> None:
-    for job_id, state in job_service.run_queued_jobs({**HANDLERS, **EXPORT_HANDLERS}, rt):
-        if state != JobState.succeeded:
-            with rt.sessions() as s:
-                raise AssertionError(f"job {job_id}: {s.get(Job, job_id).error}")
-
-
-def run_job(rt: Runtime, kind: str, params: dict[str, Any]) -> Job:
-    with transaction(rt.sessions) as s:
-        job_id = job_service.create_job(s, kind, params, None).id
-    job_service.execute_job(job_id, EXPORT_HANDLERS, rt)
-    with rt.sessions() as s:
-        return s.get(Job, job_id)
-
-
-def export(rt: Runtime, out: Path, **kw: Any) -> dict[str, Any]:
-    job = run_job(rt, "export", export_params(out, **{"format": "native", **kw}))
-    assert job.state == JobState.succeeded, job.error
-    return job.result
-
-
-def import_(rt: Runtime, path: Path, fmt: str = "native") -> Job:
-    return run_job(rt, "import", import_params(path, format=fmt))
-
-
-def counts(rt: Runtime) -> dict[str, int]:
-    with rt.sessions() as s:
-        return {m.__name__: s.scalar(select(func.count()).select_from(m)) for m in (Video, Frame, Annotation, Region, Sample)}
-
-
-def tree(root: Path) -> dict[str, bytes]:
-    return {p.relative_to(root).as_posix(): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
-
-
-@pytest.fixture(scope="module")
-def source(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Runtime]:
-    rt = build_source(tmp_path_factory.mktemp("source") / "ws")
-    yield rt
-    rt.close()
-
-
-@pytest.fixture
-def fresh(tmp_path: Path) -> Iterator[Runtime]:
-    rt = new_runtime(tmp_path / "fresh")
-    yield rt
-    rt.close()
 
 
 def test_round_trip_is_byte_identical(source: Runtime, fresh: Runtime, tmp_path: Path) -> None:

@@ -16,7 +16,7 @@ from dataset.services import jobs as job_service
 from dataset.services.demo import true_regions
 from dataset.services.ingest import ingest_params
 from dataset.synthetic import read_video, write_synthetic_dataset
-from tests.workers import extra_settings, queue_settings, rt, start_worker, wait_for  # noqa: F401  (fixtures)
+from tests.workers import wait_for
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime
 

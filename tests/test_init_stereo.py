@@ -20,9 +20,7 @@ from model.raft_import import convert, stereo_branch_state, strip_module  # noqa
 from model.stereo.raft import StereoBranch  # noqa: E402
 from model.train import EXIT_SUCCEEDED  # noqa: E402
 from tests.raft_golden import fixture_state, load_fixture  # noqa: E402
-from tests.test_export_native import source as source  # noqa: E402  the shared source workspace fixture
 from tests.train_runs import make_run, parameters, train_here  # noqa: E402
-from tests.train_runs import native as native  # noqa: E402  the small native export fixture
 
 # A fusion preset whose stereo branch has RAFT-Stereo's widths (lite keeps n_downsample 3: its
 # feature encoder and mask head differ, so they start fresh).

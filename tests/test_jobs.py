@@ -18,7 +18,7 @@ from dataset.services import jobs as job_service
 from dataset.services.ingest import ingest_params
 from dataset.settings import Settings
 from dataset.synthetic import write_synthetic_dataset
-from tests.workers import extra_settings, queue_settings, rt, start_worker, wait_for  # noqa: F401  (fixtures)
+from tests.workers import wait_for
 from webapp.cli import main
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime

@@ -30,11 +30,9 @@ from model.train.events import read_events
 from model.train.spec import RUN_FILE
 from tests.conftest import make_settings, migrate
 from tests.runs_data import add_accepted_samples
-from tests.test_export_native import source as source  # the shared source workspace fixture
 from tests.test_runs import SHORT, _queued_run, write_checkpoint
 from tests.test_runs_honest import _backbones
 from tests.train_runs import make_run, train_here
-from tests.train_runs import native as native  # the small native export fixture
 from webapp.cli import main
 from webapp.jobs import runs as run_control
 from webapp.jobs.handlers import HANDLERS

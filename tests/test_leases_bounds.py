@@ -9,7 +9,7 @@ from dataset.db import transaction
 from dataset.models import Annotation, Frame, FrameState, Job, JobState
 from dataset.services import users as user_service
 from tests.conftest import PASSWORD
-from tests.test_annotate import auth, scene  # noqa: F401  (the fixture)
+from tests.test_annotate import auth
 
 
 def _encode_jobs(runtime) -> list[list[int]]:  # type: ignore[no-untyped-def]

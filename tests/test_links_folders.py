@@ -18,12 +18,13 @@ from dataset.formats import write_pfm
 from dataset.models import Evaluation, EvaluationResult, Job, JobState, TrainingRun
 from dataset.services import evaluations, run_logs, training
 from dataset.services import jobs as job_service
+from dataset.settings import Settings
 from tests.conftest import make_settings, migrate
 from tests.evaluations_data import evaluated_database
 from tests.runs_data import H, W, add_accepted_samples
 from tests.test_run_logs import write_launch
 from tests.test_runs import SHORT, _queued_run, write_checkpoint
-from tests.test_trust_boundary import bearer, samples, settings  # noqa: F401  (fixtures)
+from tests.test_trust_boundary import bearer
 from webapp.jobs.handlers import HANDLERS
 
 LONG = "a" * 300  # over the 255 bytes a file name may have
@@ -38,6 +39,12 @@ def outside_tree(tmp_path: Path) -> Path:
     (outside / "report.json").write_text('{"outside": true}')
     write_checkpoint(outside / "checkpoints" / "step_0000001.pt", 1)
     return outside
+
+
+@pytest.fixture
+def settings(roots_settings: Settings) -> Settings:
+    """A workspace with one registered dataset root, ``data`` → ``<tmp>/roots/data`` (tests/fixtures/runs.py)."""
+    return roots_settings
 
 
 def listing(folder: Path) -> list[str]:

@@ -14,64 +14,12 @@ import threading
 import time
 import uuid
 from collections import Counter
-from collections.abc import Iterator
-from contextlib import contextmanager
-from dataclasses import dataclass
-from pathlib import Path
 
 import httpx
 import pytest
 
-from dataset.db import migrate, transaction
-from dataset.models import Role
-from dataset.services import users as user_service
-from tests.conftest import PASSWORD, csrf_from, make_settings
-from webapp.cli.workspace import make_server, server_url
-from webapp.runtime import Runtime
-
-MAX_S = 1.0  # login_slowdown_max_s
-FLOOD = 16  # the attacker's connections
-THREADS = 8  # the server's, as `serve` starts it
-
-
-@dataclass(frozen=True)
-class Served:
-    url: str
-    proxied: bool  # behind a trusted proxy: every connection comes from 127.0.0.1, X-Forwarded-For says who
-
-    def client(self, address: str) -> httpx.Client:
-        """A client whose requests the app counts as coming from ``address``."""
-        if self.proxied:
-            return httpx.Client(base_url=self.url, headers={"X-Forwarded-For": address}, timeout=30)
-        return httpx.Client(base_url=self.url, transport=httpx.HTTPTransport(local_address=address), timeout=30)
-
-
-@contextmanager
-def serve(home: Path, proxied: bool, **overrides: object) -> Iterator[Served]:
-    """The app under `serve`'s server with small limits (a name's 2nd failure and an address's 4th start
-    the slow-down) and an admin; behind a proxy at 127.0.0.1 when ``proxied``."""
-    settings = make_settings(home, **{"login_limit_per_account_address": "3 per 15 minutes",
-                                      "login_slowdown_per_account": "2 per 15 minutes",
-                                      "login_slowdown_per_address": "4 per 15 minutes", "login_slowdown_max_s": MAX_S,
-                                      **({"trusted_proxies": ["127.0.0.1/32"]} if proxied else {}), **overrides})
-    migrate(settings.database_url)
-    rt = Runtime(settings)
-    with transaction(rt.sessions) as s:
-        user_service.create_user(s, "admin", Role.admin, PASSWORD)
-    server = make_server(settings, rt, "127.0.0.1", 0, threads=THREADS)
-    threading.Thread(target=server.run, daemon=True).start()
-    try:
-        yield Served(server_url(server).rstrip("/"), proxied)
-    finally:
-        server.close()
-        rt.close()
-
-
-@pytest.fixture(params=["direct", "proxy"])
-def served(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Served]:
-    """:func:`serve`, reached directly and through a trusted proxy."""
-    with serve(tmp_path / "ws", proxied=request.param == "proxy") as app:
-        yield app
+from tests.conftest import PASSWORD, csrf_from
+from tests.fixtures.login_flood import FLOOD, MAX_S, Served
 
 
 def addresses(served: Served) -> tuple[str, str]:

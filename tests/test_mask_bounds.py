@@ -16,7 +16,8 @@ from dataset.formats import FormatError, mask_to_rle, rle_to_mask
 from dataset.models import Annotation, Frame, FrameState, Sample, SampleState
 from dataset.services import users as user_service
 from dataset.services.validate import REASON_CHARS
-from tests.test_annotate import H, W, auth, scene  # noqa: F401  (the fixture)
+from tests.fixtures.annotate import H, W
+from tests.test_annotate import auth
 
 HUGE = {"size": [16384, 16384], "counts": [16384 * 16384]}  # 2^28 pixels in 40 bytes of JSON
 HUGE_TEXT = mask_to_rle(np.zeros((1, 1), bool)) | {"size": [16384, 16384], "counts": "0" + "o" * 5 + "0"}

@@ -19,7 +19,7 @@ from dataset.services.ingest import ingest_params
 from dataset.services.prefilter import launch_prefilter
 from dataset.synthetic import write_synthetic_dataset
 from tests.conftest import make_settings
-from tests.workers import extra_settings, queue_settings, rt, start_worker, wait_for  # noqa: F401  (fixtures)
+from tests.workers import wait_for
 from webapp.benchmarks.vlm_server import ChatRequest, LocalVLMServer, Reply
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime

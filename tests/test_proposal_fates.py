@@ -14,23 +14,15 @@ from dataset.db import transaction
 from dataset.formats import mask_to_rle, rle_to_mask
 from dataset.models import Frame, FrameState, Job, Proposal, ProposalScan
 from dataset.services import jobs as job_service
-from dataset.services.ingest import ingest_params
-from dataset.synthetic import write_synthetic_dataset
+from tests.fixtures.annotate import H, W
 from tests.test_annotate import auth, truth
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime
 
-W, H = 320, 180
-
 
 @pytest.fixture
-def scene(runtime: Runtime, tmp_path: Path) -> Path:
-    """Four ingested synthetic frames (seed 6: a picture on the wall), prefiltered, not yet approved."""
-    [path] = write_synthetic_dataset(tmp_path / "s", videos=1, seed=6, n_frames=4, width=W, height=H)
-    with transaction(runtime.sessions) as s:
-        runtime.submit(s, "ingest", ingest_params(str(path), fps=None, dedup_hamming=None, prefilter=True), None)
-    job_service.run_queued_jobs(HANDLERS, runtime)
-    return path
+def scene(prefiltered_scene: Path) -> Path:
+    return prefiltered_scene
 
 
 def _frames(runtime: Runtime) -> list[Frame]:

@@ -20,8 +20,9 @@ from dataset.services import jobs as job_service
 from dataset.services.proposals import configured_proposers
 from dataset.settings import Settings, SettingsError, load_settings
 from tests.conftest import make_settings
+from tests.fixtures.annotate import H, W
 from tests.test_annotate import auth, truth
-from tests.test_proposal_fates import H, W, _approve_all, _pair, _submit, scene  # noqa: F401 (a fixture)
+from tests.test_proposal_fates import _approve_all, _pair, _submit
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime
 
@@ -45,6 +46,11 @@ def settings(tmp_path: Path, request: pytest.FixtureRequest) -> Settings:
     s = make_settings(tmp_path / "ws", proposal_threshold=getattr(request, "param", TOP))
     migrate(s.database_url)
     return s
+
+
+@pytest.fixture
+def scene(prefiltered_scene: Path) -> Path:
+    return prefiltered_scene
 
 
 def _proposals(client, tokens, frame_id: int) -> list[dict]:  # type: ignore[no-untyped-def]

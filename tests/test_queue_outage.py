@@ -15,7 +15,7 @@ from dataset.services import users as user_service
 from dataset.services.ingest import ingest_params
 from dataset.synthetic import write_synthetic_dataset
 from tests.conftest import PASSWORD, csrf_from, login, make_settings
-from tests.workers import queue_settings, rt, start_worker, wait_for  # noqa: F401  (fixtures)
+from tests.workers import wait_for
 from webapp.jobs.handlers import HANDLERS
 from webapp.jobs.queue import UnsentSweep, pending_job_ids
 from webapp.runtime import Runtime

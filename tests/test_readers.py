@@ -13,8 +13,7 @@ from dataset.export.errors import LayoutError
 from dataset.formats import write_kitti_disparity, write_mask, write_pfm, write_png, write_rgb
 from dataset.readers import READER_FORMATS, Camera, SampleError, StereoSample, open_reader, resize_sample
 from dataset.readers.base import make_regions, resize_disparity
-from tests.test_export_native import SEED, SPLIT, export
-from tests.test_export_native import source as source  # the shared source workspace fixture
+from tests.fixtures.workspaces import SEED, SPLIT, export
 from webapp.runtime import Runtime
 
 H, W = 12, 16

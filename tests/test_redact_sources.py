@@ -8,6 +8,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+import pytest
 from sqlalchemy import select
 
 from dataset.db import transaction
@@ -16,10 +17,18 @@ from dataset.redact import redactor_for, shown, stop_using, use_redactor
 from dataset.services import jobs as job_service
 from dataset.services import users as user_service
 from dataset.services.jobs import JobContext
-from tests.test_links_folders import bearer, evaluated, samples, settings  # noqa: F401  (fixtures)
+from dataset.settings import Settings
+from tests.test_links_folders import bearer, evaluated
 from tests.test_returned_frames import submitted_and_generated
 from tests.test_runs import SHORT, _queued_run
 from webapp.runtime import Runtime
+
+
+@pytest.fixture
+def settings(roots_settings: Settings) -> Settings:
+    """A workspace with one registered dataset root, ``data`` → ``<tmp>/roots/data`` (tests/fixtures/runs.py)."""
+    return roots_settings
+
 
 REASON = "see /usr/share/doc and /tmp/x: the mask misses the left edge"
 

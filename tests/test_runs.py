@@ -26,12 +26,6 @@ def bearer(tokens: dict[str, str], role: str) -> dict[str, str]:
     return {"Authorization": f"Bearer {tokens[role]}"}
 
 
-@pytest.fixture
-def samples(runtime) -> list[int]:  # type: ignore[no-untyped-def]
-    with transaction(runtime.sessions) as s:
-        return add_accepted_samples(s, runtime.media, videos=3)
-
-
 def _launch(client, tokens, **body):  # type: ignore[no-untyped-def]
     return client.post("/api/v1/runs", json={"preset": "lite", **SHORT, **body}, headers=bearer(tokens, "admin"))
 

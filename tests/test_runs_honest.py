@@ -26,13 +26,10 @@ from model.train import CANCEL_FILE, EXIT_DIVERGED, EXIT_FAILED, EXIT_SUCCEEDED
 from model.train.checkpoints import step_checkpoints, step_path
 from model.train.events import read_events
 from tests.runs_data import add_accepted_samples
-from tests.test_export_native import source as source  # the shared source workspace fixture
 from tests.test_runs import _queued_run
-from tests.test_runs import samples as samples  # accepted samples in the runtime's database
 from tests.train_runs import events, make_run, parameters, split_names, train_here
-from tests.train_runs import native as native  # the small native export fixture
 from tests.waiting import until
-from tests.workers import extra_settings, queue_settings, rt, start_worker, wait_for  # noqa: F401  (fixtures)
+from tests.workers import wait_for
 from webapp.jobs import runs as run_control
 
 TINY = {"train.steps": 4, "train.batch_size": 2, "train.crop": (32, 64), "train.train_iters": 2,

@@ -18,7 +18,7 @@ from dataset.services import training
 from model import registry
 from model.launcher import group_members
 from tests.runs_data import add_accepted_samples
-from tests.workers import extra_settings, queue_settings, rt, start_worker, wait_for  # noqa: F401  (fixtures)
+from tests.workers import wait_for
 from webapp.cli import main
 from webapp.jobs import runs as run_control
 from webapp.jobs.handlers import HANDLERS

@@ -36,7 +36,6 @@ from model.train.watch import alive
 from tests.runs_data import add_accepted_samples
 from tests.train_runs import events
 from tests.waiting import until
-from tests.workers import extra_settings, queue_settings, rt, wait_for  # noqa: F401  (fixtures)
 from webapp.jobs import runs as run_control
 from webapp.jobs.handlers import HANDLERS
 

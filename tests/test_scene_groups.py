@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import random
+import shutil
 from pathlib import Path
 
 import cv2
@@ -21,7 +22,7 @@ from dataset.readers.version import pin_dataset_version, split_by_video
 from dataset.services.errors import InvalidInput
 from dataset.services.scene_groups import join_scene_group
 from dataset.synthetic import write_synthetic_dataset
-from tests.test_export_native import build_source, export
+from tests.fixtures.workspaces import export, open_runtime
 from tests.test_ingest import run_ingest, write_avi
 from webapp.benchmarks.scale import seed
 from webapp.runtime import Runtime
@@ -115,8 +116,9 @@ def test_a_video_copying_two_groups_merges_them(sessions) -> None:  # type: igno
             "a": ids["a"], "b": ids["a"], "c": ids["a"], "running": None}
 
 
-def test_run_and_export_splits_keep_a_scene_group_together(tmp_path: Path) -> None:
-    rt = build_source(tmp_path / "ws")  # 3 synthetic videos and a capture, with accepted samples
+def test_run_and_export_splits_keep_a_scene_group_together(source_template: Path, tmp_path: Path) -> None:
+    shutil.copytree(source_template, tmp_path, dirs_exist_ok=True)
+    rt = open_runtime(tmp_path / "ws")  # 3 synthetic videos and a capture, with accepted samples
     try:
         with rt.sessions() as s:
             version = pin_dataset_version(s, rt.media)

@@ -12,8 +12,7 @@ from torch.utils.data import DataLoader
 from dataset.export import LayoutError
 from dataset.export.torch_dataset import IllusionStereoDataset
 from dataset.formats import read_mask, read_pfm, read_rgb
-from tests.test_export_native import SEED, SPLIT, export
-from tests.test_export_native import source as source  # the shared source workspace fixture
+from tests.fixtures.workspaces import SEED, SPLIT, export
 from webapp.runtime import Runtime
 
 

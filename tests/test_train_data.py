@@ -19,9 +19,7 @@ from model.train import EXIT_SUCCEEDED
 from model.train.checkpoints import step_path
 from model.train.order import SampleKey
 from model.train.spec import read_run
-from tests.test_export_native import source as source  # the shared source workspace fixture
 from tests.train_runs import OVERRIDES, events, make_run, split_names, train_here
-from tests.train_runs import native as native  # the small native export fixture
 from webapp.runtime import Runtime
 
 CFG = load_preset("lite", OVERRIDES).train

@@ -19,7 +19,6 @@ from model.train import EXIT_DIVERGED, EXIT_FAILED, EXIT_ORPHANED, EXIT_SUCCEEDE
 from model.train.checkpoints import best_path, step_checkpoints, step_path
 from model.train.events import read_events
 from model.train.watch import alive
-from tests.test_export_native import source as source  # the shared source workspace fixture
 from tests.train_runs import (
     engine_env,
     events,
@@ -32,7 +31,6 @@ from tests.train_runs import (
     torchrun_command,
     train_here,
 )
-from tests.train_runs import native as native  # the small native export fixture
 
 
 @pytest.mark.slow

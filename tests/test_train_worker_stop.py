@@ -18,7 +18,7 @@ from model.train.checkpoints import step_checkpoints
 from tests.runs_data import add_accepted_samples
 from tests.train_runs import events
 from tests.waiting import until
-from tests.workers import extra_settings, queue_settings, rt, start_worker, wait_for  # noqa: F401  (fixtures)
+from tests.workers import wait_for
 from webapp.jobs import runs as run_control
 
 # Endless and tiny: no checkpoint or validation of its own, so only the stop can write one.

@@ -18,7 +18,7 @@ from model.launcher import TRAINERS_FILE, group_members
 from tests.runs_data import add_accepted_samples
 from tests.train_runs import events
 from tests.waiting import until
-from tests.workers import extra_settings, queue_settings, rt, start_worker, wait_for  # noqa: F401  (fixtures)
+from tests.workers import wait_for
 from webapp.jobs import runs as run_control
 
 ENDLESS = {"train.steps": 100_000, "train.batch_size": 2, "train.crop": (32, 64), "train.train_iters": 2,

@@ -22,26 +22,16 @@ from dataset.settings import Settings
 from dataset.wording import quoted
 from model import registry
 from model.checkpoint import FORMAT, UnsafeCheckpoint, load_checkpoint, upgrade_checkpoint
-from tests.conftest import make_settings, migrate
-from tests.runs_data import add_accepted_samples
+from tests.conftest import make_settings
 from tests.test_runs import SHORT, _queued_run, write_checkpoint
 from webapp.cli import main
 from webapp.jobs.handlers import HANDLERS
 
 
 @pytest.fixture
-def settings(tmp_path: Path) -> Settings:
-    """A workspace with one registered dataset root, ``data`` → ``<tmp>/roots/data``."""
-    (tmp_path / "roots" / "data" / "kitti").mkdir(parents=True)
-    s = make_settings(tmp_path / "ws", dataset_roots={"data": str(tmp_path / "roots" / "data")})
-    migrate(s.database_url)
-    return s
-
-
-@pytest.fixture
-def samples(runtime) -> list[int]:  # type: ignore[no-untyped-def]
-    with transaction(runtime.sessions) as s:
-        return add_accepted_samples(s, runtime.media, videos=3)
+def settings(roots_settings: Settings) -> Settings:
+    """A workspace with one registered dataset root, ``data`` → ``<tmp>/roots/data`` (tests/fixtures/runs.py)."""
+    return roots_settings
 
 
 def bearer(tokens: dict[str, str], role: str) -> dict[str, str]:

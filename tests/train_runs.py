@@ -10,7 +10,6 @@ import sys
 from pathlib import Path
 from typing import Any
 
-import pytest
 import torch
 
 from dataset.readers import open_reader
@@ -19,21 +18,11 @@ from model.presets import load_preset
 from model.train.__main__ import main
 from model.train.checkpoints import step_path
 from model.train.events import read_events
-from tests.test_export_native import SEED, SPLIT, export
-from webapp.runtime import Runtime
 
 # Tiny and fast: the synthetic export's 64×96 frames, a few steps, 2 refinement iterations.
 OVERRIDES: dict[str, Any] = {"steps": 4, "batch_size": 2, "crop": [64, 96], "train_iters": 2, "test_iters": 2,
                              "val_every": 2, "checkpoint_every": 2, "keep_last": 2, "seed": 3, "amp": False}
 TORCHRUN = Path(sys.executable).with_name("torchrun")
-
-
-@pytest.fixture(scope="module")
-def native(source: Runtime, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A native export of the shared source workspace: 3 training and 3 test samples of 64×96."""
-    out = tmp_path_factory.mktemp("train") / "ds"
-    export(source, out, split=SPLIT, seed=SEED)
-    return out
 
 
 def split_names(native: Path) -> dict[str, list[str]]:

@@ -15,10 +15,9 @@ from typing import Any
 
 import pytest
 
-from dataset.db import migrate
 from dataset.models import Job
 from dataset.settings import Settings, write_settings_file
-from tests.conftest import TEST_REDIS_URL, make_settings
+from tests.conftest import TEST_REDIS_URL, make_settings, migrate_copying
 from webapp.benchmarks import served
 from webapp.runtime import Runtime
 
@@ -29,7 +28,8 @@ def extra_settings() -> dict[str, Any]:
 
 
 @pytest.fixture(params=["sqlite", "redis"])
-def queue_settings(request: pytest.FixtureRequest, tmp_path: Path, extra_settings: dict[str, Any]) -> Settings:
+def queue_settings(request: pytest.FixtureRequest, tmp_path: Path, extra_settings: dict[str, Any],
+                   migrated_sqlite: Path) -> Settings:
     home = tmp_path / "ws"
     home.mkdir()
     values = dict(extra_settings)
@@ -40,7 +40,7 @@ def queue_settings(request: pytest.FixtureRequest, tmp_path: Path, extra_setting
         values.update(queue_url=TEST_REDIS_URL, queue_name=f"test-{uuid.uuid4().hex[:8]}")
     write_settings_file(home, **values)
     settings = make_settings(home)
-    migrate(settings.database_url)
+    migrate_copying(settings.database_url, migrated_sqlite)
     return settings
 
 
