@@ -112,6 +112,30 @@ def test_imported_depth_models_and_stereo_checkpoints_keep_to_their_commands(imp
     assert clash.exit_code == 1 and "imported:da-s is taken by another kind of checkpoint" in clash.output
 
 
+def test_depth_runs_a_transformers_directory_with_its_own_processor(tmp_path: Path, fixture: dict) -> None:
+    """A directory saved by transformers (no import record) keeps the backend's processor pipeline."""
+    import transformers
+
+    backbone = transformers.Dinov2Config(hidden_size=32, num_hidden_layers=4, num_attention_heads=2,
+                                         intermediate_size=64, patch_size=14, image_size=70,
+                                         out_indices=[1, 2, 3, 4], reshape_hidden_states=False)
+    config = transformers.DepthAnythingConfig(backbone_config=backbone, reassemble_hidden_size=32,
+                                              neck_hidden_sizes=[8, 16, 32, 32], fusion_hidden_size=16,
+                                              head_hidden_size=8, patch_size=14)
+    torch.manual_seed(0)
+    transformers.DepthAnythingForDepthEstimation(config).save_pretrained(tmp_path / "tiny")
+    out = tmp_path / "d.pfm"
+    result = CliRunner().invoke(main, ["depth", str(fixture["image"]), "--checkpoint", str(tmp_path / "tiny"),
+                                       "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    backend = DepthAnythingBackend(tmp_path / "tiny")
+    assert not backend.original
+    assert np.array_equal(read_pfm(out), backend.estimate(read_rgb(fixture["image"])))
+    bad = CliRunner().invoke(main, ["depth", str(fixture["image"]), "--checkpoint", str(tmp_path / "tiny"),
+                                    "--out", str(tmp_path / "d.png")])
+    assert bad.exit_code == 2 and "must end in .pfm" in bad.output
+
+
 def _shapes(width: int, blocks: int, *, swiglu: bool = False) -> dict[str, torch.Tensor]:
     """Just the tensors infer_architecture reads, for an encoder ``width`` wide with ``blocks`` blocks."""
     state = {"pretrained.patch_embed.proj.weight": torch.empty(width, 3, 14, 14),

@@ -33,7 +33,7 @@ def depth(state: CliState, image: Path, checkpoint: str | None, out: Path, devic
     if checkpoint is None:
         if state.data_dir is None or state.settings.depth_backend != "depth-anything-v2":
             raise click.ClickException(_NO_MODEL)
-        path = Path(state.settings.depth_model_path)
+        path = state.settings.depth_model_path  # unset: the backend says it needs one
     else:
         settings = state.settings if checkpoint.startswith(f"{registry.IMPORTED}:") else None
         with service_errors():
