@@ -15,6 +15,7 @@ from click.testing import CliRunner
 torch = pytest.importorskip("torch")
 pytest.importorskip("transformers")
 
+from annotation.depth import DepthError  # noqa: E402
 from annotation.depth.depth_anything import DepthAnythingBackend, upsample  # noqa: E402
 from annotation.depth.depth_anything_import import (  # noqa: E402
     IMPORT_FILE,
@@ -90,6 +91,8 @@ def test_imported_original_file_infers_what_the_original_code_does(imported, fix
     network = backend.network_output(image)
     assert np.array_equal(upsample(network, 61, 83), ours)
     assert np.abs(upsample(network, 61, 83, align_corners=False) - reference).max() > 10 * tolerance
+    with pytest.raises(DepthError, match="an aspect ratio beyond 8:1 is not supported"):
+        backend.estimate(np.zeros((10, 90, 3), np.uint8))
     del backend.model.backbone.embeddings.interpolate_pos_encoding  # back to transformers' own
     plain = upsample(backend.network_output(image), 61, 83)
     assert np.abs(plain - reference).max() > 10 * tolerance

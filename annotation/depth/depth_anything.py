@@ -41,6 +41,9 @@ IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
 ORIGINAL_SIZE = 518  # the original infer_image's default input_size
 POSITION_OFFSET = 0.1  # DINOv2's (and so the original Depth Anything's) interpolation offset
+# The original scales the shorter side up to 518 px: a long, thin image would become a network input
+# whose attention no machine holds. Beyond this side it is refused instead.
+MAX_ORIGINAL_SIDE = 8 * ORIGINAL_SIZE
 
 
 class DepthAnythingBackend:
@@ -78,6 +81,10 @@ class DepthAnythingBackend:
     def network_output(self, image: np.ndarray) -> torch.Tensor:
         """The model's relative disparity (1xhxw, on the model's device) for RGB uint8 ``image`` prepared
         as the original code prepares it (:func:`original_input`)."""
+        height, width = original_size(image.shape[0], image.shape[1], self._multiple)
+        if max(height, width) > MAX_ORIGINAL_SIDE:
+            raise DepthError(f"a {image.shape[0]}x{image.shape[1]} image would enter the network as {height}x{width}: "
+                             f"an aspect ratio beyond {MAX_ORIGINAL_SIDE // ORIGINAL_SIZE}:1 is not supported")
         pixels = torch.from_numpy(original_input(image, self._multiple))[None].to(self.device)
         with torch.inference_mode():
             return self.model(pixel_values=pixels).predicted_depth

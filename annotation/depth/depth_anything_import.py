@@ -132,12 +132,12 @@ def to_transformers(state: Mapping[str, Tensor], arch: Mapping[str, Any]) -> tup
                 if part.startswith("attn.qkv."):
                     suffix = part[len("attn.qkv."):]
                     for index, name in enumerate(("q_proj", "k_proj", "v_proj")):
-                        out[f"{layer}attention.{name}.{suffix}"] = tensor[index * width:(index + 1) * width].clone()
+                        out[f"{layer}attention.{name}.{suffix}"] = tensor[index * width:(index + 1) * width]
                 elif part.startswith("mlp.w12."):
                     half = tensor.shape[0] // 2  # [gate; up]: the original takes silu(first half) · second half
                     suffix = part[len("mlp.w12."):]
-                    out[f"{layer}mlp.gate_proj.{suffix}"] = tensor[:half].clone()
-                    out[f"{layer}mlp.up_proj.{suffix}"] = tensor[half:].clone()
+                    out[f"{layer}mlp.gate_proj.{suffix}"] = tensor[:half]
+                    out[f"{layer}mlp.up_proj.{suffix}"] = tensor[half:]
                 else:
                     prefix = next((p for p in block if part.startswith(p)), None)
                     if prefix is None:
