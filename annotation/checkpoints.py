@@ -21,7 +21,10 @@ CONFIG_FILE = "config.json"
 PROCESSOR_FILE = "preprocessor_config.json"
 # Files that change what a checkpoint answers without touching its weights (prompts, decoding);
 # hashed by content where present. The two above are hashed always (a placeholder when missing).
-_EXTRA_CONFIGS = ("generation_config.json", "tokenizer_config.json", "chat_template.json", "chat_template.jinja")
+# imported_from.json marks a Depth Anything directory converted from an original file, which then runs
+# the original pipeline.
+_EXTRA_CONFIGS = ("generation_config.json", "tokenizer_config.json", "chat_template.json", "chat_template.jinja",
+                  "imported_from.json")
 _WEIGHT_PATTERNS = ("*.safetensors", "*.bin")
 
 

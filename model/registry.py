@@ -4,8 +4,9 @@ evaluation use when none is named.
 
 One way to name a checkpoint (:func:`resolve`): ``RUN:NAME`` — a run's ``best``, ``last`` or file
 name, as the web's forms name it (``3:best``, ``3:step_0001000.pt``) — or ``imported:NAME``, a
-checkpoint ``illusion-studio checkpoints import`` wrote to ``<home>/checkpoints/imported/NAME.pt``;
-the command line may also give a file's path.
+checkpoint ``illusion-studio checkpoints import`` wrote to ``<home>/checkpoints/imported/NAME.pt``
+(a Depth Anything V2 depth model: the ``transformers`` directory ``<home>/checkpoints/imported/NAME/``,
+which ``illusion-studio depth`` runs); the command line may also give a file's path.
 
 ``<home>/models/current.json`` = ``{"run": id, "file": name, "step": n, "checkpoint": path}``
 (the path relative to the workspace for a run's file; absolute only for a file the command line
@@ -153,11 +154,21 @@ def imported_path(home: Path, name: str) -> Path:
     return Path(home) / IMPORTED_DIR / f"{name}.pt"
 
 
-def imported_names(home: Path) -> list[str]:
-    """The workspace's imported checkpoints, by name (never through a link)."""
+def imported_model_dir(home: Path, name: str) -> Path:
+    """Where the imported depth model ``name`` (a ``transformers`` directory) lives; InvalidInput for a
+    name that is not one."""
+    return imported_path(home, name).with_suffix("")
+
+
+def imported_names(home: Path, *, depth_models: bool = False) -> list[str]:
+    """The workspace's imported checkpoints (``depth_models``: its imported depth-model directories), by
+    name (never through a link)."""
     folder = Path(home) / IMPORTED_DIR
     if not folder.is_dir() or folder.is_symlink():
         return []
+    if depth_models:
+        return sorted(p.name for p in folder.iterdir() if p.is_dir() and not p.is_symlink()
+                      and IMPORTED_NAME.fullmatch(p.name) and (p / "config.json").is_file())
     return sorted(p.stem for p in folder.glob("*.pt") if p.is_file() and not p.is_symlink()
                   and IMPORTED_NAME.fullmatch(p.stem))
 
@@ -181,6 +192,9 @@ def resolve(settings: Any | None, text: str, *, allow_path: bool = False) -> Res
     kind, name = text.split(":", 1)
     if kind == IMPORTED:
         path = imported_path(Path(settings.home), name)
+        if (not path.is_file() or path.is_symlink()) and name in imported_names(Path(settings.home), depth_models=True):
+            raise InvalidInput(f"{text} is an imported depth model (Depth Anything V2), not a stereo checkpoint: "
+                               f"`illusion-studio depth IMAGE --checkpoint {text}` runs it")
         if not path.is_file() or path.is_symlink():
             have = ", ".join(f"{IMPORTED}:{n}" for n in imported_names(Path(settings.home))) or "none"
             raise NotFound(f"no imported checkpoint {name!r} (imported: {have}; "
@@ -192,23 +206,53 @@ def resolve(settings: Any | None, text: str, *, allow_path: bool = False) -> Res
     return ResolvedCheckpoint(run_checkpoint(runs_dir, run, name, best_step=None).path, text, run)
 
 
-IMPORT_SOURCES = ("raft-stereo",)
+def resolve_depth_model(settings: Any | None, text: str) -> ResolvedCheckpoint:
+    """The depth-model directory ``text`` names: ``imported:NAME`` in the workspace of ``settings``, or
+    any other text as a directory's path. InvalidInput for a run's checkpoint name, NotFound saying
+    what exists for a name that names nothing."""
+    if not text.startswith(f"{IMPORTED}:"):
+        if is_name(text):
+            raise InvalidInput(f"{text} names a run's checkpoint, not a depth model: give imported:NAME "
+                               "or a checkpoint directory")
+        return ResolvedCheckpoint(Path(text).expanduser(), Path(text).name)
+    if settings is None:
+        raise InvalidInput(f"checkpoint {text!r} is a name: naming a checkpoint needs a workspace (--data-dir)")
+    name = text.split(":", 1)[1]
+    path = imported_model_dir(Path(settings.home), name)
+    if name not in imported_names(Path(settings.home), depth_models=True):
+        have = ", ".join(f"{IMPORTED}:{n}" for n in imported_names(Path(settings.home), depth_models=True)) or "none"
+        raise NotFound(f"no imported depth model {name!r} (imported: {have}; `illusion-studio checkpoints import "
+                       "--from depth-anything-v2 FILE` adds one)")
+    return ResolvedCheckpoint(path, text)
+
+
+IMPORT_SOURCES = ("raft-stereo", "depth-anything-v2")
 
 
 def import_checkpoint(settings: Any, file: Path, *, source: str, name: str | None = None,
                       replace: bool = False) -> dict[str, Any]:
     """Convert the published checkpoint ``file`` (``source``: one of IMPORT_SOURCES) and register it
-    in the workspace as ``imported:NAME`` (default NAME: the file's stem). Returns ``{"checkpoint":
+    in the workspace as ``imported:NAME`` (default NAME: the file's stem): a RAFT-Stereo file as
+    ``NAME.pt``, a Depth Anything V2 one as the directory ``NAME/``. Returns ``{"checkpoint":
     the name, "architecture", "keys_loaded", …}``; InvalidInput for a bad name or a file that is not
     such a checkpoint (one line), Conflict when the name is taken and ``replace`` is not given."""
     if source not in IMPORT_SOURCES:
         raise InvalidInput(f"unknown checkpoint source {source!r}; choose one of {', '.join(IMPORT_SOURCES)}")
-    from model.raft_import import import_file
-
     name = name or re.sub(r"[^A-Za-z0-9._-]", "-", Path(file).stem).lstrip("._-")[:64] or source
-    destination = imported_path(Path(settings.home), name)
-    if destination.exists() and not replace:
+    stereo, depth = imported_path(Path(settings.home), name), imported_model_dir(Path(settings.home), name)
+    # One namespace for both kinds: imported:NAME must name one thing.
+    taken = stereo if source == "depth-anything-v2" else depth
+    if os.path.lexists(taken):
+        raise Conflict(f"{IMPORTED}:{name} is taken by another kind of checkpoint; choose another name")
+    destination = depth if source == "depth-anything-v2" else stereo
+    if os.path.lexists(destination) and not replace:
         raise Conflict(f"{IMPORTED}:{name} exists; choose another name or replace it")
+    if destination.is_symlink():
+        raise Conflict(f"{IMPORTED}:{name} is a symbolic link, not the workspace's own checkpoint; remove it first")
+    if source == "depth-anything-v2":
+        from annotation.depth.depth_anything_import import import_file
+    else:
+        from model.raft_import import import_file
     try:
         result = import_file(Path(file), destination)
     except ValueError as exc:  # not a checkpoint of that source, unreadable, or a pickle naming code

@@ -48,6 +48,9 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "checkpoints": ("webapp.cli.runs", "checkpoints", "Fusion-model checkpoint files."),
     "predict": ("webapp.cli.model", "predict", "Disparity of the LEFT/RIGHT rectified pair (fused, or a stereo-only "
                 "network's such as an imported RAFT-Stereo); extra outputs go beside --out as <stem>_<output>.pfm."),
+    "depth": ("webapp.cli.depth", "depth", "Relative disparity (inverse depth, up to scale and shift) of IMAGE from a "
+                                           "Depth Anything V2 model; an imported original file runs as the original "
+                                           "code's infer_image(image, 518)."),
     "evaluate": ("webapp.cli.evaluate", "evaluate_cmd", "Evaluate METHODs: EPE and bad-x (and depth metrics where a camera "
                                                         "is known) per region."),
     "media": ("webapp.cli.media", "media", "Media store housekeeping."),

@@ -15,7 +15,8 @@ from webapp.cli.state import CliState, pass_state
 @click.command("import")
 @click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--from", "source", required=True, type=click.Choice(registry.IMPORT_SOURCES),
-              help="Whose checkpoint FILE is: raft-stereo (princeton-vl/RAFT-Stereo's published files).")
+              help="Whose checkpoint FILE is: raft-stereo (princeton-vl/RAFT-Stereo's published files) or "
+                   "depth-anything-v2 (DepthAnything/Depth-Anything-V2's depth_anything_v2_vit*.pth).")
 @click.option("--name", default=None, help="Register it as imported:NAME (default: FILE's name, no extension).")
 @click.option("--replace", is_flag=True, help="Replace an imported checkpoint of that name.")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as one JSON object.")
@@ -23,14 +24,21 @@ from webapp.cli.state import CliState, pass_state
 def import_checkpoint(state: CliState, file: Path, source: str, name: str | None, replace: bool,
                       as_json: bool) -> None:
     """Read FILE weights-only (a file that holds code is refused), infer its architecture from its
-    tensors, map every key and register it; `predict --checkpoint imported:NAME` then runs it. Nothing
-    is downloaded: RAFT-Stereo's README says where its files are."""
+    tensors, map every key and register it; `predict --checkpoint imported:NAME` then runs it (a Depth
+    Anything V2 file: `depth IMAGE --checkpoint imported:NAME`). Nothing is downloaded: each project's
+    README says where its files are."""
     with service_errors():
         result = registry.import_checkpoint(state.settings, file, source=source, name=name, replace=replace)
     if as_json:
         click.echo(json.dumps(result, indent=2))
         return
     arch = result["architecture"]
+    if source == "depth-anything-v2":
+        click.echo(f"{result['checkpoint']}: Depth Anything V2 {arch['encoder']} ({arch['embed_dim']} wide, "
+                   f"{arch['depth']} blocks, {arch['heads']} heads; neck {arch['neck_hidden_sizes']}, fusion "
+                   f"{arch['fusion_hidden_size']}), relative depth, {result['keys_loaded']} tensors loaded "
+                   f"({result['tensors_in_file']} in the file)")
+        return
     click.echo(f"{result['checkpoint']}: RAFT-Stereo ({arch['published'] or 'a layout none of the published files has'}"
                f"), n_downsample {arch['n_downsample']}, {arch['gru_levels']} GRU levels of {arch['hidden']}, "
                f"{arch['context_norm']}-norm context, {'shared backbone, ' if arch['shared_backbone'] else ''}"
