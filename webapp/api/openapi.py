@@ -105,6 +105,14 @@ _CHECKPOINT = {"name": "name", "in": "path", "required": True, "schema": {"type"
                "description": "a file name from the run's checkpoints (best.pt, step_0001000.pt, …)"}
 
 
+_SAMPLE_BLOCKER = {"type": ["string", "null"],
+                   "description": "why this workspace cannot make samples of the video's frames (no depth model "
+                                  "configured and no depth of the video's own), or null when it can"}
+_GENERATE_FAILED = {"type": ["object", "null"],
+                    "description": "the frame's last generate job, when it failed and the frame still has no sample: "
+                                   "job_id, error, finished_at (POST /jobs/{job_id}/retry once the cause is fixed)"}
+
+
 def openapi_document() -> dict[str, Any]:
     """The document ``/api/v1/openapi.json`` serves: every operation with each status and content type it answers."""
     return {
@@ -127,7 +135,7 @@ def openapi_document() -> dict[str, Any]:
                 "get": _op("List videos with their frame counts, newest first", "annotator", schema="VideoList",
                            params=[_q("limit", desc="1..1000, default 100"), *_CURSORS]),
                 "post": _op("Upload a video (multipart: file, fps, source, illusion_type…); starts an ingest job",
-                            "curator", body="VideoUpload", body_type="multipart/form-data", ok="202", schema="Job",
+                            "curator", body="VideoUpload", body_type="multipart/form-data", ok="202", schema="UploadJob",
                             errors=_QUEUE_DOWN),
             },
             "/prefilter": {"post": _op("Queue VLM prefilter jobs for unclaimed ingested frames", "curator",
@@ -162,7 +170,9 @@ def openapi_document() -> dict[str, Any]:
                 "Save (submit=false: a draft) or submit the regions; a stale version is a 409", "annotator",
                 params=[_FRAME_ID], body="AnnotationSave", schema="AnnotationSaved",
                 errors={"409": "the annotation changed since `version`, someone else holds the frame, or it is not "
-                               "approved; nothing was written",
+                               "approved; nothing was written. Or a submit of a frame that cannot become a sample: "
+                               "the regions are saved as a draft, and the answer (an AnnotationSaved with `error` "
+                               "and `sample_blocker`) says why",
                         "503": "submitting queues the sample's generation, and the job queue is unreachable: nothing "
                                "was written; try again in a minute"})},
             "/frames/{frame_id}/proposals/{proposal_id}/reject": {"post": _op(
@@ -279,6 +289,8 @@ def openapi_document() -> dict[str, Any]:
                 "PrefilterRequest": {"type": "object", "properties": {
                     "video_id": {"type": "integer"}, "backend": {"enum": ["heuristic", "openai", "transformers"]},
                     "sparse": {"type": "boolean", "description": "the authors' sparse mode"}}},
+                "UploadJob": {"allOf": [_ref("Job"), {"type": "object", "properties": {
+                    "sample_blocker": _SAMPLE_BLOCKER}}]},
                 "JobBatch": {"type": "object", "properties": {"jobs": {"type": "array", "items": _ref("Job")}}},
                 "VideoList": {"type": "object", "properties": {"items": {"type": "array", "items": {"type": "object"}},
                                                                "prev": _PAGED["prev"], "next": _PAGED["next"]}},
@@ -321,7 +333,9 @@ def openapi_document() -> dict[str, Any]:
                                                                 "state": {"type": "string"}}},
                 "AnnotationSaved": {"type": "object", "properties": {
                     "frame_id": {"type": "integer"}, "annotation_version": {"type": "integer"},
-                    "submitted": {"type": "boolean"}, "state": {"type": "string", "description": "the frame's"}}},
+                    "submitted": {"type": "boolean"}, "state": {"type": "string", "description": "the frame's"},
+                    "sample_blocker": {**_SAMPLE_BLOCKER, "description": "only in a refused submit's 409: why the "
+                                                                          "frame cannot become a sample"}}},
                 "Lease": {"type": "object", "properties": {"frame_id": {"type": "integer"},
                                                            "lease_expires": {"type": "string", "format": "date-time"},
                                                            "returned_waiting": _RETURNED_WAITING}},
@@ -335,7 +349,9 @@ def openapi_document() -> dict[str, Any]:
                     "next_id": {"type": ["integer", "null"]}, "embedding_ready": {"type": "boolean"},
                     "proposals": {"type": "array", "items": _ref("Proposal")},
                     "proposals_ready": {"type": "boolean", "description": "every configured proposer has looked"},
-                    "proposals_note": {"type": "string", "description": "why there are no proposals (empty if any)"}}}]},
+                    "proposals_note": {"type": "string", "description": "why there are no proposals (empty if any)"},
+                    "sample_blocker": _SAMPLE_BLOCKER,
+                    "generate_failed": _GENERATE_FAILED}}]},
                 "Proposal": {"type": "object", "properties": {
                     "id": {"type": "integer"}, "source": {"type": "string"}, "score": {"type": "number"},
                     "illusion_type": {"enum": [*_ILLUSION_TYPES, None]}, "guess": {"type": ["string", "null"]},

@@ -18,6 +18,7 @@ from dataset.services.errors import InvalidInput
 from dataset.services.ingest import DEFAULT_DEDUP_HAMMING, ingest_params
 from dataset.services.paging import keyset_page
 from dataset.services.prefilter import launch_prefilter
+from dataset.services.sample_blockers import sample_blocker
 from dataset.services.validate import db_int
 from webapp.api.blueprint import api, cursor_args, int_arg, json_body
 from webapp.auth import requires
@@ -46,7 +47,10 @@ MAX_FILE_NAME = 255
 @api.post("/videos")
 @requires(Role.curator)
 def upload_video() -> ResponseReturnValue:
-    """Multipart upload: ``file`` plus optional ``fps``, ``source``, ``illusion_type`` (repeatable)."""
+    """Multipart upload: ``file`` plus optional ``fps``, ``source``, ``illusion_type`` (repeatable).
+
+    The answer is the ingest job's, with ``sample_blocker``: why this workspace cannot make samples of
+    the video's frames (no depth model, and an upload brings no depth of its own), or None."""
     upload = request.files.get("file")
     if upload is None or not upload.filename:
         raise InvalidInput("send the video as the multipart field 'file'")
@@ -84,7 +88,7 @@ def upload_video() -> ResponseReturnValue:
     user = g.db.get(User, current_user.id)
     job = rt.queue.submit(g.db, "ingest", params, user)
     g.db.commit()
-    return job_service.job_json(job), 202
+    return {**job_service.job_json(job), "sample_blocker": sample_blocker(rt.settings, None)}, 202
 
 
 @api.post("/prefilter")

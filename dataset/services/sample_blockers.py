@@ -1,0 +1,89 @@
+"""Whether a video's frames can become samples, said before anyone works on them.
+
+A sample needs a monocular disparity (:func:`dataset.services.generate.mono_disparity`): a
+configured depth model, or a disparity that came with the frame (imported beside a video,
+rendered from a reconstruction, or a synthetic scene's own). Without one the generate job can
+only fail after the annotation is done, so every place that leads to that work (the upload's
+answer, Review, Annotate, submit, the Dashboard) asks :func:`sample_blocker` first. Generate jobs
+that failed anyway are found by :func:`failed_generate`, so a frame shows why it has no sample.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session
+
+from dataset.models import Frame, FrameState, Job, JobState, Video
+from dataset.settings import Settings
+
+# Frame assets that hold a disparity of the frame's own, in the order generation prefers them.
+OWN_DEPTH_ASSETS = ("reconstruction_disparity", "precomputed_disparity")
+GENERATE_JOB = "generate"
+
+
+def sample_blocker(settings: Settings, video: Video | None, frame: Frame | None = None) -> str | None:
+    """The reason ``video``'s frames (``frame``, when given) cannot become samples, or None when they can.
+
+    ``video`` None stands for a plain video not ingested yet (an upload): it has no depth of its own.
+    A video's own depth is judged on ``frame``'s assets when given, else on what the video recorded at
+    ingest (a synthetic scene, or maps imported with ``--mono``).
+    """
+    if frame is not None and "reconstruction_disparity" in frame.assets:
+        return None  # generation reads it before any backend
+    if settings.depth_backend == "depth-anything-v2":
+        if settings.depth_model_path is None:
+            return ("depth_backend is depth-anything-v2 but depth_model_path is not set: set it to a local "
+                    "Depth Anything V2 checkpoint directory")
+        return None
+    if _own_depth(video, frame):
+        return None
+    return ("this workspace cannot make samples from this video: it has no monocular depth of its own and no "
+            "depth model is configured. Set depth_backend = 'depth-anything-v2' with depth_model_path, or "
+            "ingest the video with its per-frame disparity maps (illusion-studio ingest --mono DIR)")
+
+
+def _own_depth(video: Video | None, frame: Frame | None) -> bool:
+    if video is None:
+        return False
+    if frame is not None:
+        assets = frame.assets or {}
+        return "precomputed_disparity" in assets or ("mono_disparity" in assets and bool(video.meta.get("synthetic")))
+    return bool(video.meta.get("synthetic") or video.meta.get("mono"))
+
+
+def frame_blocker(session: Session, settings: Settings, frame: Frame) -> str | None:
+    """:func:`sample_blocker` for one stored frame."""
+    return sample_blocker(settings, session.get(Video, frame.video_id), frame)
+
+
+def failed_generate(session: Session, frame: Frame) -> dict[str, Any] | None:
+    """The frame's last generate job when it failed and the frame is still waiting for its sample
+    (``{"job_id", "error", "finished_at"}``), else None: a later success or a new job supersedes it."""
+    if frame.state != FrameState.annotated:
+        return None
+    job = session.scalar(select(Job).where(Job.kind == GENERATE_JOB, Job.params["frame_id"].as_integer() == frame.id)
+                         .order_by(Job.id.desc()).limit(1))
+    if job is None or job.state not in (JobState.failed, JobState.interrupted):
+        return None
+    return {"job_id": job.id, "error": job.error,
+            "finished_at": job.finished_at.isoformat() + "Z" if job.finished_at else None}
+
+
+def failed_generate_count(session: Session) -> int:
+    """How many annotated frames have a failed last generate job (the Dashboard's count)."""
+    last = (select(Job.params["frame_id"].as_integer().label("frame_id"), func.max(Job.id).label("job_id"))
+            .where(Job.kind == GENERATE_JOB).group_by(Job.params["frame_id"].as_integer()).subquery())
+    return session.scalar(select(func.count()).select_from(last)
+                          .join(Job, Job.id == last.c.job_id)
+                          .join(Frame, Frame.id == last.c.frame_id)
+                          .where(Job.state.in_((JobState.failed, JobState.interrupted)),
+                                 Frame.state == FrameState.annotated)) or 0
+
+
+def frame_sample_status(session: Session, settings: Settings, frame: Frame) -> dict[str, Any]:
+    """What a frame's JSON says of its way to a sample: ``sample_blocker`` (why it cannot get one, or
+    None) and ``generate_failed`` (its failed generate job, see :func:`failed_generate`, or None)."""
+    return {"sample_blocker": frame_blocker(session, settings, frame),
+            "generate_failed": failed_generate(session, frame)}

@@ -1,0 +1,88 @@
+"""A video whose frames cannot become samples is named as such before the work: the upload's answer,
+the frame's JSON and a refused submit (its regions kept as a draft) carry the reason; a generate job
+that failed anyway shows on the frame and the Dashboard, with a retry."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import pytest
+from sqlalchemy import select, update
+
+from dataset.db import transaction
+from dataset.models import Annotation, Frame, FrameState, Job, JobState, Video
+from dataset.services import jobs as job_service
+from dataset.services.sample_blockers import failed_generate, failed_generate_count, sample_blocker
+from tests.conftest import make_settings
+from tests.test_ingest import run_ingest, write_avi
+from webapp.runtime import Runtime
+
+
+def auth(tokens: dict[str, str], who: str = "annotator") -> dict[str, str]:
+    return {"Authorization": f"Bearer {tokens[who]}"}
+
+
+@pytest.fixture
+def plain(runtime: Runtime, tmp_path: Path) -> int:
+    """An approved frame of a plain video (no depth of its own); its id."""
+    run_ingest(runtime, write_avi(tmp_path / "plain.avi", 3), fps=None, dedup_hamming=None)
+    with transaction(runtime.sessions) as s:
+        s.execute(update(Frame).values(state=FrameState.approved))
+        return s.scalar(select(Frame.id).order_by(Frame.id))
+
+
+def test_the_blocker_follows_the_settings_and_the_videos_own_depth(tmp_path: Path) -> None:
+    bare = make_settings(tmp_path / "a")
+    assert "no monocular depth of its own" in sample_blocker(bare, None)
+    assert sample_blocker(bare, Video(meta={"synthetic": True})) is None
+    assert sample_blocker(bare, Video(meta={"mono": "precomputed"})) is None
+    frame = Frame(assets={"thumb": "k"})
+    assert sample_blocker(bare, Video(meta={}), frame) is not None
+    assert sample_blocker(bare, Video(meta={}), Frame(assets={"precomputed_disparity": "k"})) is None
+    assert sample_blocker(bare, Video(meta={}), Frame(assets={"reconstruction_disparity": "k"})) is None
+    no_path = make_settings(tmp_path / "b", depth_backend="depth-anything-v2")
+    assert "depth_model_path is not set" in sample_blocker(no_path, None)
+    model = make_settings(tmp_path / "c", depth_backend="depth-anything-v2", depth_model_path=tmp_path)
+    assert sample_blocker(model, None) is None and sample_blocker(model, Video(meta={}), frame) is None
+
+
+def test_the_upload_answer_says_so(client, tokens, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    data = write_avi(tmp_path / "u.avi", 4).read_bytes()
+    response = client.post("/api/v1/videos", headers=auth(tokens, "curator"), content_type="multipart/form-data",
+                           data={"file": (io.BytesIO(data), "clip.avi")})
+    assert response.status_code == 202 and "no monocular depth of its own" in response.json["sample_blocker"]
+
+
+def test_a_submit_is_refused_with_the_reason_and_the_draft_kept(client, tokens, plain, runtime) -> None:  # type: ignore[no-untyped-def]
+    detail = client.get(f"/api/v1/frames/{plain}", headers=auth(tokens)).json
+    assert "depth_backend" in detail["sample_blocker"] and detail["generate_failed"] is None
+    h, w = detail["height"], detail["width"]
+    regions = [{"pair": 0, "kind": "illusion", "mask": {"size": [h, w], "counts": [5, 10, h * w - 15]}}]
+    refused = client.post(f"/api/v1/frames/{plain}/annotation", headers=auth(tokens),
+                          json={"version": 0, "regions": regions, "illusion_type": "picture"})
+    assert refused.status_code == 409, refused.json
+    assert refused.json["sample_blocker"] == detail["sample_blocker"] and "saved as a draft" in refused.json["error"]
+    assert (refused.json["submitted"], refused.json["state"], refused.json["annotation_version"]) == (False, "approved", 1)
+    with runtime.sessions() as s:
+        assert s.scalar(select(Annotation.submitted).where(Annotation.frame_id == plain)) is False
+        assert s.scalar(select(Job.id).where(Job.kind == "generate")) is None  # nothing queued to fail
+    again = client.get(f"/api/v1/frames/{plain}", headers=auth(tokens)).json
+    assert len(again["regions"]) == 1 and again["annotation_version"] == 1
+
+
+def test_a_failed_generate_job_shows_on_the_frame_and_the_dashboard(client, tokens, plain, runtime) -> None:  # type: ignore[no-untyped-def]
+    with transaction(runtime.sessions) as s:  # annotated before the check existed: its job failed
+        s.execute(update(Frame).where(Frame.id == plain).values(state=FrameState.annotated))
+        job = job_service.create_job(s, "generate", {"frame_id": plain, "annotation_version": 1}, None)
+        job.state, job.error = JobState.failed, f"frame {plain} has no monocular disparity"
+    with runtime.sessions() as s:
+        failed = failed_generate(s, s.get(Frame, plain))
+        assert failed["job_id"] == job.id and "no monocular disparity" in failed["error"]
+        assert failed_generate_count(s) == 1
+    detail = client.get(f"/api/v1/frames/{plain}", headers=auth(tokens)).json
+    assert detail["generate_failed"]["job_id"] == job.id
+    with transaction(runtime.sessions) as s:  # a newer job supersedes it
+        job_service.create_job(s, "generate", {"frame_id": plain, "annotation_version": 1}, None)
+    with runtime.sessions() as s:
+        assert failed_generate(s, s.get(Frame, plain)) is None and failed_generate_count(s) == 0
