@@ -87,3 +87,12 @@ def frame_sample_status(session: Session, settings: Settings, frame: Frame) -> d
     None) and ``generate_failed`` (its failed generate job, see :func:`failed_generate`, or None)."""
     return {"sample_blocker": frame_blocker(session, settings, frame),
             "generate_failed": failed_generate(session, frame)}
+
+
+def with_blockers(session: Session, settings: Settings, items: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """``items`` (frame JSON with ``id``) with their ``sample_blocker``: the review grid marks the frames
+    an approval would send to annotators for nothing."""
+    for item in items:
+        frame = session.get(Frame, item["id"])
+        item["sample_blocker"] = frame_blocker(session, settings, frame) if frame is not None else None
+    return items

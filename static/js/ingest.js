@@ -105,6 +105,9 @@ async function uploadAll() {
     try {
       const job = await upload(file, fields, (f) => { row.querySelector("progress").value = f; });
       row.querySelector("progress").value = 0;
+      if (job.sample_blocker) {
+        row.append(el("span", { className: "copy-note sample-blocker" }, `No samples from this video: ${job.sample_blocker}`));
+      }
       follow(job, row);
     } catch (err) {
       row.querySelector(".status").textContent = sessionEnded(err) ? "not uploaded" : err.message;

@@ -304,7 +304,9 @@ def openapi_document() -> dict[str, Any]:
                     "revision": {"type": "integer", "description": "the frame revision the curator saw; stale → 409"}}},
                 "ReviewItem": {"allOf": [_ref("Frame"), {"type": "object", "properties": {
                     "thumb": {"type": "string"}, "prefilter": {"type": ["object", "null"]},
-                    "last_review": {"type": ["object", "null"]}}}]},
+                    "last_review": {"type": ["object", "null"]},
+                    "sample_blocker": {**_SAMPLE_BLOCKER, "description": "in the review grid's items: "
+                                                                          + _SAMPLE_BLOCKER["description"]}}}]},
                 "ReviewPage": _list("ReviewItem", **_PAGED, reasons={"type": "array"}, questions={"type": "array"},
                                     total_exact={"type": "boolean",
                                                  "description": "false: total is a lower bound (a question filter)"}),
