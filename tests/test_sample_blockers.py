@@ -86,3 +86,17 @@ def test_a_failed_generate_job_shows_on_the_frame_and_the_dashboard(client, toke
         job_service.create_job(s, "generate", {"frame_id": plain, "annotation_version": 1}, None)
     with runtime.sessions() as s:
         assert failed_generate(s, s.get(Frame, plain)) is None and failed_generate_count(s) == 0
+
+
+def test_the_dashboard_counts_them(client, plain, runtime) -> None:  # type: ignore[no-untyped-def]
+    from tests.conftest import login
+
+    login(client, "curator")
+    page = client.get("/").get_data(as_text=True)
+    assert 'id="blocked-videos"' in page and "1 video\n" in page and 'id="generate-failed"' not in page
+    with transaction(runtime.sessions) as s:
+        s.execute(update(Frame).where(Frame.id == plain).values(state=FrameState.annotated))
+        job = job_service.create_job(s, "generate", {"frame_id": plain}, None)
+        job.state, job.error = JobState.failed, "no monocular disparity"
+    page = client.get("/").get_data(as_text=True)
+    assert 'id="generate-failed"' in page and "1 annotated frame\n" in page and "?state=failed" in page

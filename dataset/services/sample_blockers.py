@@ -96,3 +96,12 @@ def with_blockers(session: Session, settings: Settings, items: list[dict[str, An
         frame = session.get(Frame, item["id"])
         item["sample_blocker"] = frame_blocker(session, settings, frame) if frame is not None else None
     return items
+
+
+def blocked_videos(session: Session, settings: Settings) -> int:
+    """How many ingested videos cannot make samples as the workspace is configured (judged on what
+    each video recorded at ingest; frames given a reconstruction later are not seen here)."""
+    if sample_blocker(settings, None) is None:
+        return 0  # a depth model serves every video
+    return sum(1 for meta in session.scalars(select(Video.meta))
+               if sample_blocker(settings, Video(meta=meta or {})) is not None)
