@@ -100,3 +100,73 @@ def test_the_dashboard_counts_them(client, plain, runtime) -> None:  # type: ign
         job.state, job.error = JobState.failed, "no monocular disparity"
     page = client.get("/").get_data(as_text=True)
     assert 'id="generate-failed"' in page and "1 annotated frame\n" in page and "?state=failed" in page
+
+
+def test_a_video_brings_its_own_depth_with_mono(runtime: Runtime, tmp_path: Path) -> None:
+    import numpy as np
+
+    from dataset.services.generate import mono_disparity
+    from dataset.services.ingest import MONO_ASSET
+
+    video = write_avi(tmp_path / "v.avi", 4, size=(160, 90))
+    mono = tmp_path / "mono"
+    mono.mkdir()
+    for i in range(3):  # frame 3 has none
+        np.save(mono / f"frame_{i:06d}.npy", np.full((90, 160), i + 1.0, np.float32))
+    job = run_ingest(runtime, video, fps=None, dedup_hamming=None, mono_dir=str(mono))
+    assert job.state == JobState.succeeded, job.error
+    assert (job.result["mono_frames"], job.result["mono_missing"]) == (3, [3])
+    with runtime.sessions() as s:
+        frames = s.scalars(select(Frame).order_by(Frame.index)).all()
+        v = s.get(Video, frames[0].video_id)
+        assert v.meta["mono"] == "partial"
+        assert [sample_blocker(runtime.settings, v, f) is None for f in frames] == [True, True, True, False]
+        got = mono_disparity(runtime.settings, runtime.media, frames[1], v, np.zeros((90, 160, 3), np.uint8))
+        assert got.provenance["depth_backend"] == "precomputed" and float(got.disparity.mean()) == 2.0
+        assert MONO_ASSET in frames[1].assets
+
+
+@pytest.mark.parametrize("make, message", [
+    ("missing", "no such folder"), ("empty", "no .pfm or .npy"), ("unnamed", "must end with its frame's index"),
+    ("wrong-size", "a disparity must match its frame")])
+def test_bad_mono_folders_are_refused_with_a_reason(runtime: Runtime, tmp_path: Path, make: str, message: str) -> None:
+    import numpy as np
+
+    from dataset.services.errors import InvalidInput
+    from dataset.services.ingest import ingest_params
+
+    mono = tmp_path / "mono"
+    if make != "missing":
+        mono.mkdir()
+    if make == "unnamed":
+        np.save(mono / "depth.npy", np.zeros((90, 160), np.float32))
+    if make == "wrong-size":
+        np.save(mono / "f_0.npy", np.zeros((10, 10), np.float32))
+    video = write_avi(tmp_path / "v.avi", 2)
+    if make != "wrong-size":
+        with pytest.raises(InvalidInput, match=message):
+            ingest_params(str(video), mono_dir=str(mono))
+        return
+    job = run_ingest(runtime, video, fps=None, dedup_hamming=None, mono_dir=str(mono))
+    assert job.state == JobState.failed and message in job.error and "f_0.npy" in job.error
+    with runtime.sessions() as s:
+        assert s.scalar(select(Video.id)) is None  # nothing left behind
+
+
+def test_cli_ingest_mono_and_the_note_without_it(tmp_path: Path) -> None:
+    import numpy as np
+
+    from tests.test_cli import cli
+
+    home = tmp_path / "ws"
+    assert cli("--data-dir", str(home), "init").returncode == 0
+    video, mono = write_avi(tmp_path / "v.avi", 2), tmp_path / "mono"
+    mono.mkdir()
+    np.save(mono / "frame_0.npy", np.zeros((90, 160), np.float32))
+    plain_run = cli("--data-dir", str(home), "ingest", str(video))
+    assert plain_run.returncode == 0 and "no monocular depth of its own" in plain_run.stderr
+    with_mono = cli("--data-dir", str(home), "ingest", str(video), "--mono", str(mono))
+    assert with_mono.returncode == 0 and "note:" not in with_mono.stderr
+    other = write_avi(tmp_path / "w.avi", 2, seed=1)
+    two = cli("--data-dir", str(home), "ingest", str(video), str(other), "--mono", str(mono))
+    assert two.returncode != 0 and "one video's disparities, but 2 videos" in two.stderr
