@@ -11,7 +11,7 @@ import pytest
 from sqlalchemy import select, update
 
 from dataset.db import transaction
-from dataset.models import Annotation, Frame, FrameState, Job, JobState, Video
+from dataset.models import Annotation, Frame, FrameState, Job, JobState, User, Video
 from dataset.services import jobs as job_service
 from dataset.services.sample_blockers import failed_generate, failed_generate_count, sample_blocker
 from tests.conftest import make_settings
@@ -81,7 +81,14 @@ def test_a_failed_generate_job_shows_on_the_frame_and_the_dashboard(client, toke
         assert failed["job_id"] == job.id and "no monocular disparity" in failed["error"]
         assert failed_generate_count(s) == 1
     detail = client.get(f"/api/v1/frames/{plain}", headers=auth(tokens)).json
-    assert detail["generate_failed"]["job_id"] == job.id
+    assert detail["generate_failed"]["job_id"] == job.id and detail["failed_elsewhere"] == []
+    with transaction(runtime.sessions) as s:  # the annotator's next frame names it
+        s.add(Annotation(frame_id=plain, user_id=s.scalar(select(User.id).where(User.name == "annotator")),
+                         submitted=True, version=1))
+        other = s.scalar(select(Frame.id).where(Frame.id != plain).limit(1))
+    elsewhere = client.get(f"/api/v1/frames/{other}", headers=auth(tokens)).json["failed_elsewhere"]
+    assert elsewhere == [{"frame_id": plain, "job_id": job.id, "error": job.error}]
+    assert client.get(f"/api/v1/frames/{other}", headers=auth(tokens, "curator")).json["failed_elsewhere"] == []
     with transaction(runtime.sessions) as s:  # a newer job supersedes it
         job_service.create_job(s, "generate", {"frame_id": plain, "annotation_version": 1}, None)
     with runtime.sessions() as s:

@@ -12,10 +12,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from sqlalchemy import func, select
+from sqlalchemy import Select, func, select
 from sqlalchemy.orm import Session
 
-from dataset.models import Frame, FrameState, Job, JobState, Video
+from dataset.models import Annotation, Frame, FrameState, Job, JobState, Video
 from dataset.settings import Settings
 
 # Frame assets that hold a disparity of the frame's own, in the order generation prefers them.
@@ -71,22 +71,39 @@ def failed_generate(session: Session, frame: Frame) -> dict[str, Any] | None:
             "finished_at": job.finished_at.isoformat() + "Z" if job.finished_at else None}
 
 
+def _failed_last_jobs() -> Select[Any]:
+    """(frame id, job) of the annotated frames whose last generate job failed, newest job first."""
+    frame_id = Job.params["frame_id"].as_integer()
+    last = (select(frame_id.label("frame_id"), func.max(Job.id).label("job_id"))
+            .where(Job.kind == GENERATE_JOB).group_by(frame_id).subquery())
+    return (select(last.c.frame_id, Job).join(Job, Job.id == last.c.job_id).join(Frame, Frame.id == last.c.frame_id)
+            .where(Job.state.in_((JobState.failed, JobState.interrupted)), Frame.state == FrameState.annotated)
+            .order_by(Job.id.desc()))
+
+
 def failed_generate_count(session: Session) -> int:
     """How many annotated frames have a failed last generate job (the Dashboard's count)."""
-    last = (select(Job.params["frame_id"].as_integer().label("frame_id"), func.max(Job.id).label("job_id"))
-            .where(Job.kind == GENERATE_JOB).group_by(Job.params["frame_id"].as_integer()).subquery())
-    return session.scalar(select(func.count()).select_from(last)
-                          .join(Job, Job.id == last.c.job_id)
-                          .join(Frame, Frame.id == last.c.frame_id)
-                          .where(Job.state.in_((JobState.failed, JobState.interrupted)),
-                                 Frame.state == FrameState.annotated)) or 0
+    return session.scalar(select(func.count()).select_from(_failed_last_jobs().subquery())) or 0
 
 
-def frame_sample_status(session: Session, settings: Settings, frame: Frame) -> dict[str, Any]:
+def failed_generates_of(session: Session, user_id: int, *, other_than: int | None = None,
+                        limit: int = 5) -> list[dict[str, Any]]:
+    """The frames ``user_id`` submitted whose sample could not be made (``{"frame_id", "job_id",
+    "error"}``, newest first, at most ``limit``): the annotator's next page names them."""
+    query = _failed_last_jobs().join(Annotation, Annotation.frame_id == Frame.id).where(Annotation.user_id == user_id)
+    if other_than is not None:
+        query = query.where(Frame.id != other_than)
+    return [{"frame_id": fid, "job_id": job.id, "error": job.error}
+            for fid, job in session.execute(query.limit(limit)).all()]
+
+
+def frame_sample_status(session: Session, settings: Settings, frame: Frame, user_id: int) -> dict[str, Any]:
     """What a frame's JSON says of its way to a sample: ``sample_blocker`` (why it cannot get one, or
-    None) and ``generate_failed`` (its failed generate job, see :func:`failed_generate`, or None)."""
+    None), ``generate_failed`` (its failed generate job, see :func:`failed_generate`, or None) and
+    ``failed_elsewhere`` (the caller's other frames whose sample could not be made)."""
     return {"sample_blocker": frame_blocker(session, settings, frame),
-            "generate_failed": failed_generate(session, frame)}
+            "generate_failed": failed_generate(session, frame),
+            "failed_elsewhere": failed_generates_of(session, user_id, other_than=frame.id)}
 
 
 def with_blockers(session: Session, settings: Settings, items: list[dict[str, Any]]) -> list[dict[str, Any]]:

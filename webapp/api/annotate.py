@@ -64,7 +64,7 @@ def frame_detail(frame_id: int) -> ResponseReturnValue:
     detail = annotate.frame_detail(g.db, frame_id, current_user)
     frame = g.db.get(Frame, frame_id)
     detail["embedding_ready"] = segmentation.embedding_ready(runtime().settings, frame)
-    detail.update(sample_blockers.frame_sample_status(g.db, runtime().settings, frame))
+    detail.update(sample_blockers.frame_sample_status(g.db, runtime().settings, frame, current_user.id))
     return {**detail, **proposals.frame_proposals(g.db, runtime().settings, frame_id)}
 
 

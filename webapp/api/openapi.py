@@ -353,7 +353,10 @@ def openapi_document() -> dict[str, Any]:
                     "proposals_ready": {"type": "boolean", "description": "every configured proposer has looked"},
                     "proposals_note": {"type": "string", "description": "why there are no proposals (empty if any)"},
                     "sample_blocker": _SAMPLE_BLOCKER,
-                    "generate_failed": _GENERATE_FAILED}}]},
+                    "generate_failed": _GENERATE_FAILED,
+                    "failed_elsewhere": {"type": "array", "items": {"type": "object"},
+                                         "description": "the caller's other submitted frames whose generate job "
+                                                        "failed: frame_id, job_id, error (newest first, at most 5)"}}}]},
                 "Proposal": {"type": "object", "properties": {
                     "id": {"type": "integer"}, "source": {"type": "string"}, "score": {"type": "number"},
                     "illusion_type": {"enum": [*_ILLUSION_TYPES, None]}, "guess": {"type": ["string", "null"]},

@@ -113,6 +113,7 @@ async function open(id, how) {
   banner(null);
   showReturned(detail.returned);
   showSampleNote(detail);
+  showFailedElsewhere(detail.failed_elsewhere);
   showWaiting(detail.returned_waiting);
   if (reason) readOnly(reason);
   else {
@@ -144,6 +145,20 @@ function showSampleNote(detail) {
     more.append(el("a", { href: `/jobs/${failed.job_id}` }, `Job ${failed.job_id}`),
                 ": a curator retries it there once the cause is fixed.");
   }
+}
+
+// Frames this annotator submitted whose sample could not be made: named on the next page, so a failure
+// after the submit does not go unseen. The link opens the job, whose page says why and offers the retry.
+function showFailedElsewhere(failed) {
+  const first = failed?.[0];
+  $("failed-elsewhere").hidden = !first;
+  if (!first) return;
+  const others = failed.length > 1 ? ` (${plural(failed.length - 1, "other frame")} too)` : "";
+  $("failed-elsewhere-text").textContent = `Frame #${first.frame_id}, which you submitted, got no sample${others}: `
+    + `${first.error ?? "its generate job failed"}.`;
+  const link = $("failed-elsewhere-link");
+  link.href = `/jobs/${first.job_id}`;
+  link.textContent = `Job ${first.job_id}`;
 }
 
 // A frame a curator sent back: who, when and why, above the stage.
