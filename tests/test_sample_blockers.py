@@ -82,6 +82,8 @@ def test_a_failed_generate_job_shows_on_the_frame_and_the_dashboard(client, toke
         assert failed_generate_count(s) == 1
     detail = client.get(f"/api/v1/frames/{plain}", headers=auth(tokens)).json
     assert detail["generate_failed"]["job_id"] == job.id and detail["failed_elsewhere"] == []
+    listed = {f["id"]: f["generate_failed"] for f in client.get("/api/v1/frames", headers=auth(tokens)).json["items"]}
+    assert listed[plain]["job_id"] == job.id and sum(v is not None for v in listed.values()) == 1
     with transaction(runtime.sessions) as s:  # the annotator's next frame names it
         s.add(Annotation(frame_id=plain, user_id=s.scalar(select(User.id).where(User.name == "annotator")),
                          submitted=True, version=1))

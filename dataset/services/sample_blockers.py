@@ -122,3 +122,15 @@ def blocked_videos(session: Session, settings: Settings) -> int:
         return 0  # a depth model serves every video
     return sum(1 for meta in session.scalars(select(Video.meta))
                if sample_blocker(settings, Video(meta=meta or {})) is not None)
+
+
+def with_failures(session: Session, items: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """``items`` (frame JSON with ``id`` and ``state``) with ``generate_failed`` (see :func:`failed_generate`):
+    the frames browser marks the annotated frames whose sample could not be made."""
+    ids = [item["id"] for item in items if item.get("state") == FrameState.annotated.value]
+    failed = {fid: {"job_id": job.id, "error": job.error,
+                    "finished_at": job.finished_at.isoformat() + "Z" if job.finished_at else None}
+              for fid, job in session.execute(_failed_last_jobs().where(Frame.id.in_(ids))).all()} if ids else {}
+    for item in items:
+        item["generate_failed"] = failed.get(item["id"])
+    return items

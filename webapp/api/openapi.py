@@ -276,7 +276,7 @@ def openapi_document() -> dict[str, Any]:
                     "time_s": {"type": "number", "description": "seconds into the video"},
                     "width": {"type": "integer"}, "height": {"type": "integer"}, "state": {"type": "string"},
                     "revision": {"type": "integer"}, "image": {"type": "string", "description": "media key; GET /media/{key}"},
-                    "prefilter_keep": {"type": ["boolean", "null"]}}},
+                    "prefilter_keep": {"type": ["boolean", "null"]}, "generate_failed": _GENERATE_FAILED}},
                 "FrameList": _list("Frame", **_PAGED),
                 "Funnel": {"type": "object", "additionalProperties": {"type": "integer"}},
                 "Job": {"type": "object", "properties": {
