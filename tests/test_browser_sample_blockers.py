@@ -3,6 +3,7 @@ real browser: the Ingest page and the upload's row, the review tile, and above t
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -59,5 +60,35 @@ def test_ingest_review_and_annotate_say_why_no_samples(browser, tmp_path: Path) 
         expect(page.locator("#sample-note-title")).to_contain_text("a submit is refused")
         expect(page.locator("#sample-note-reason")).to_contain_text("depth_model_path")
         page.screenshot(path=str(tmp_path / "annotate-blocked.png"))
+
+        # a submit is refused with the reason; the planes stay, saved as a draft, and saving goes on
+        frame_id = int(page.url.rsplit("/", 1)[1])
+        page.wait_for_function("() => window.annotator?.pairs?.length === 1")
+        for key, (x, y) in (("b", (40, 30)), ("s", (110, 60))):
+            page.keyboard.press(key)
+            cx, cy = page.evaluate("([x, y]) => window.annotator.imageToClient(x, y)", [x, y])
+            page.mouse.move(cx, cy)
+            page.mouse.down()
+            page.mouse.move(cx + 20, cy + 10, steps=5)
+            page.mouse.up()
+        page.wait_for_function("() => window.annotator.pairs[0].illusion > 0 && window.annotator.pairs[0].support > 0")
+        page.keyboard.press("t")
+        page.keyboard.press("2")
+        page.wait_for_function("() => window.annotator.pairs[0].type === 'picture'")
+        page.locator("#canvas").focus()
+        page.keyboard.press("Enter")
+        expect(page.locator("#message")).to_contain_text(re.compile(r"not submitted \(your regions are saved as a draft\)",
+                                                                    re.IGNORECASE))
+        assert page.url.endswith(f"/annotate/{frame_id}")
+        saved = page.request.get(f"{url}/api/v1/frames/{frame_id}").json()
+        assert (saved["submitted"], saved["state"], len(saved["regions"])) == (False, "approved", 2), saved
+        page.keyboard.press("b")
+        cx, cy = page.evaluate("([x, y]) => window.annotator.imageToClient(x, y)", [20, 70])
+        page.mouse.move(cx, cy)
+        page.mouse.down()
+        page.mouse.move(cx + 10, cy, steps=3)
+        page.mouse.up()
+        page.wait_for_function("() => !window.annotator.dirty", timeout=10_000)  # no stale-version conflict
+        expect(page.locator("#message")).not_to_contain_text("changed since")
         context.close()
     assert errors == [], errors
