@@ -3,9 +3,11 @@ real browser: the Ingest page and the upload's row, the review tile, and above t
 
 from __future__ import annotations
 
+import io
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 from sqlalchemy import update
 
@@ -47,6 +49,18 @@ def test_ingest_review_and_annotate_say_why_no_samples(browser, tmp_path: Path) 
         page.uncheck("input[name=prefilter]")
         page.click("#upload button[type=submit]")
         expect(page.locator("#uploads li .sample-blocker")).to_contain_text("No samples from this video")
+        # with its disparities beside it, a video can: its row says nothing of the kind
+        depth = io.BytesIO()
+        np.save(depth, np.ones((90, 160), np.float32))
+        page.set_input_files("input[name=file]", files=[
+            {"name": "own.avi", "mimeType": "video/x-msvideo", "buffer": write_avi(tmp_path / "o.avi", 2, seed=3).read_bytes()}])
+        page.set_input_files("input[name=mono]", files=[
+            {"name": "frame_000000.npy", "mimeType": "application/octet-stream", "buffer": depth.getvalue()}])
+        page.uncheck("input[name=prefilter]")
+        page.click("#upload button[type=submit]")
+        expect(page.locator("#uploads li")).to_have_count(2)
+        expect(page.locator("#uploads li").first.locator(".status")).to_contain_text("ingest job")
+        expect(page.locator("#uploads li").first.locator(".sample-blocker")).to_have_count(0)
         page.goto(url + "/review?state=approved")
         expect(page.locator(".tile .sample-blocker").first).to_contain_text("depth_backend")
         context.close()

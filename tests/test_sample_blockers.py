@@ -179,3 +179,35 @@ def test_cli_ingest_mono_and_the_note_without_it(tmp_path: Path) -> None:
     other = write_avi(tmp_path / "w.avi", 2, seed=1)
     two = cli("--data-dir", str(home), "ingest", str(video), str(other), "--mono", str(mono))
     assert two.returncode != 0 and "one video's disparities, but 2 videos" in two.stderr
+
+
+def test_an_upload_brings_its_own_depth(client, tokens, runtime, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    import numpy as np
+
+    from dataset.services.ingest import MONO_ASSET
+    from webapp.jobs.handlers import HANDLERS
+
+    data = write_avi(tmp_path / "u.avi", 2).read_bytes()
+
+    def npy(value: float, shape: tuple[int, int] = (90, 160)) -> io.BytesIO:
+        buf = io.BytesIO()
+        np.save(buf, np.full(shape, value, np.float32))
+        buf.seek(0)
+        return buf
+
+    def post(maps: list[tuple[io.BytesIO, str]]):  # type: ignore[no-untyped-def]
+        return client.post("/api/v1/videos", headers=auth(tokens, "curator"), content_type="multipart/form-data",
+                           data={"file": (io.BytesIO(data), "clip.avi"), "mono": maps, "prefilter": "0", "fps": "0"})
+
+    for maps, message in [([(npy(1), "depth.npy")], "must end with its frame's index"),
+                          ([(npy(1), "f_0.png")], "is a .pfm or .npy file"),
+                          ([(npy(1), "a_0.npy"), (npy(1), "b_0.npy")], "both frame 0's disparity")]:
+        refused = post(maps)
+        assert refused.status_code == 400 and message in refused.json["error"], refused.json
+    done = post([(npy(1), "frame_000000.npy"), (npy(2), "frame_000001.npy")])
+    assert done.status_code == 202 and done.json["sample_blocker"] is None, done.json
+    job_service.run_queued_jobs(HANDLERS, runtime)
+    with runtime.sessions() as s:
+        frames = s.scalars(select(Frame).order_by(Frame.index)).all()
+        assert len(frames) == 2 and all(MONO_ASSET in f.assets for f in frames)
+        assert s.get(Video, frames[0].video_id).meta["mono"] == "precomputed"

@@ -41,12 +41,14 @@ MONO_ASSET = "precomputed_disparity"
 def ingest_params(path: str, *, fps: float | None = DEFAULT_FPS, source: str | None = None,
                   illusion_types: list[str] | None = None, dedup_hamming: int | None = DEFAULT_DEDUP_HAMMING,
                   user_id: int | None = None, original_name: str | None = None,
-                  prefilter: bool = False, mono_dir: str | None = None) -> dict[str, Any]:
+                  prefilter: bool = False, mono_dir: str | None = None,
+                  mono_files: list[tuple[int, str, str]] | None = None) -> dict[str, Any]:
     """Validated parameters of an ingest job (raises InvalidInput with a one-line reason).
 
     ``mono_dir``: a folder of the video's per-frame monocular disparities (``.pfm`` or ``.npy``, float
     HxW, larger = nearer; a file's stem ends with its frame's index in the decoded video, as in
-    ``frame_000012.npy``), stored with the frames as the ``precomputed`` depth backend reads them."""
+    ``frame_000012.npy``), stored with the frames as the ``precomputed`` depth backend reads them.
+    ``mono_files``: the same maps uploaded, as (frame index, stored path, name as uploaded)."""
     if fps is not None and not 0 < fps <= 240:
         raise InvalidInput("fps must be in (0, 240]")
     if source is not None and source not in SourceKind.__members__:
@@ -60,7 +62,8 @@ def ingest_params(path: str, *, fps: float | None = DEFAULT_FPS, source: str | N
         mono_maps(Path(mono_dir))  # refused now, not in the worker
     return {"path": path, "fps": fps, "source": source, "illusion_types": illusion_types or [],
             "dedup_hamming": dedup_hamming, "user_id": user_id, "original_name": original_name,
-            "prefilter": prefilter, **({"mono_dir": str(mono_dir)} if mono_dir is not None else {})}
+            "prefilter": prefilter, **({"mono_dir": str(mono_dir)} if mono_dir is not None else {}),
+            **({"mono_files": [list(f) for f in mono_files]} if mono_files else {})}
 
 
 def mono_maps(folder: Path) -> dict[int, Path]:
@@ -68,19 +71,29 @@ def mono_maps(folder: Path) -> dict[int, Path]:
     folder is missing, holds no maps, or names a frame twice."""
     if not folder.is_dir():
         raise InvalidInput(f"{folder}: no such folder of monocular disparities")
-    maps: dict[int, Path] = {}
-    for path in sorted(folder.iterdir()):
-        if path.name.startswith(".") or not path.is_file() or path.suffix.lower() not in MONO_SUFFIXES:
-            continue
-        index = trailing_number(path.stem)
-        if index is None:
-            raise InvalidInput(f"{path.name}: a disparity's name must end with its frame's index (frame_000012.npy)")
-        if index in maps:
-            raise InvalidInput(f"{maps[index].name} and {path.name} are both frame {index}'s disparity")
-        maps[index] = path
-    if not maps:
+    files = [p for p in sorted(folder.iterdir()) if not p.name.startswith(".") and p.is_file()
+             and p.suffix.lower() in MONO_SUFFIXES]
+    if not files:
         raise InvalidInput(f"{folder}: no {' or '.join(MONO_SUFFIXES)} disparities in it")
-    return maps
+    by_name = {p.name: p for p in files}
+    return {index: by_name[name] for index, name in mono_index([p.name for p in files]).items()}
+
+
+def mono_index(names: list[str]) -> dict[int, str]:
+    """``{frame index: name}`` of monocular disparity files by their names (``frame_000012.npy`` is
+    frame 12's); InvalidInput for a name of another kind or without an index, or a frame named twice."""
+    index: dict[int, str] = {}
+    for name in names:
+        path = Path(name)
+        if path.suffix.lower() not in MONO_SUFFIXES:
+            raise InvalidInput(f"{quoted(name)}: a monocular disparity is a {' or '.join(MONO_SUFFIXES)} file")
+        number = trailing_number(path.stem)
+        if number is None:
+            raise InvalidInput(f"{quoted(name)}: a disparity's name must end with its frame's index (frame_000012.npy)")
+        if number in index:
+            raise InvalidInput(f"{quoted(index[number])} and {quoted(name)} are both frame {number}'s disparity")
+        index[number] = name
+    return index
 
 
 def ingest_video(ctx: JobContext) -> dict[str, Any]:
@@ -101,7 +114,8 @@ def _ingest(ctx: JobContext, p: dict[str, Any]) -> dict[str, Any]:
     src = open_source(p["path"])
     info = src.info
     try:
-        mono = mono_maps(Path(p["mono_dir"])) if p.get("mono_dir") else {}
+        mono = ({i: (path, path.name) for i, path in mono_maps(Path(p["mono_dir"])).items()} if p.get("mono_dir")
+                else {int(i): (Path(path), name) for i, path, name in p.get("mono_files", [])})
     except InvalidInput as exc:
         raise IngestError(str(exc)) from None
     with transaction(ctx.sessions) as s:
@@ -165,7 +179,8 @@ def _ingest(ctx: JobContext, p: dict[str, Any]) -> dict[str, Any]:
     ctx.log(f"kept {plural(kept, 'frame')} ({new} new), dropped {plural(dropped, 'near-duplicate')}; "
             f"queued {plural(len(jobs), 'prefilter job')}")
     if mono:
-        ctx.log(f"monocular disparities from {p['mono_dir']}: {kept - len(mono_missing)} of {plural(kept, 'frame')}"
+        origin = p.get("mono_dir") or "the upload"
+        ctx.log(f"monocular disparities from {origin}: {kept - len(mono_missing)} of {plural(kept, 'frame')}"
                 + (f"; none for frame {', '.join(map(str, mono_missing[:10]))}"
                    f"{' …' if len(mono_missing) > 10 else ''}" if mono_missing else ""))
     if copy_of:
@@ -176,18 +191,19 @@ def _ingest(ctx: JobContext, p: dict[str, Any]) -> dict[str, Any]:
             **({"mono_frames": kept - len(mono_missing), "mono_missing": mono_missing} if mono else {})}
 
 
-def _mono_asset(ctx: JobContext, path: Path | None, frame: DecodedFrame) -> dict[str, str]:
-    """The frame's monocular disparity from ``path`` stored as the precomputed backend reads it
-    (``{MONO_ASSET: key}``), or nothing without a file; a map that is unreadable or of another size
-    fails the ingest, naming the file."""
-    if path is None:
+def _mono_asset(ctx: JobContext, source: tuple[Path, str] | None, frame: DecodedFrame) -> dict[str, str]:
+    """The frame's monocular disparity from ``source`` (its file and the name a message gives it) stored
+    as the precomputed backend reads it (``{MONO_ASSET: key}``), or nothing without one; a map that is
+    unreadable or of another size fails the ingest, naming the file."""
+    if source is None:
         return {}
+    path, name = source
     try:
         disparity = read_map(path)
     except FormatError as exc:
-        raise IngestError(f"{path.name}: {exc}") from None
+        raise IngestError(f"{name}: {str(exc).replace(str(path), name)}") from None
     if disparity.shape != frame.rgb.shape[:2]:
-        raise IngestError(f"{path.name} is {disparity.shape[1]}x{disparity.shape[0]}, but frame {frame.index} is "
+        raise IngestError(f"{name} is {disparity.shape[1]}x{disparity.shape[0]}, but frame {frame.index} is "
                           f"{frame.rgb.shape[1]}x{frame.rgb.shape[0]}: a disparity must match its frame")
     return {MONO_ASSET: store_outputs(ctx.media, {"disparity_mono": disparity.astype(np.float32)})["disparity_mono"]}
 

@@ -298,7 +298,12 @@ def openapi_document() -> dict[str, Any]:
                     "file": {"type": "string", "format": "binary"}, "fps": {"type": "number"},
                     "source": {"enum": ["web", "generated", "real_capture"]},
                     "prefilter": {"type": "boolean", "description": "queue the VLM prefilter afterwards (default true)"},
-                    "illusion_type": {"type": "array", "items": {"enum": _ILLUSION_TYPES}}}},
+                    "illusion_type": {"type": "array", "items": {"enum": _ILLUSION_TYPES}},
+                    "mono": {"type": "array", "items": {"type": "string", "format": "binary"},
+                             "description": "the video's per-frame monocular disparities (.npy or .pfm, float HxW, "
+                                            "larger = nearer), each named by its frame's index in the decoded video "
+                                            "(frame_000012.npy): its frames can then become samples without a "
+                                            "depth model"}}},
                 "ReviewDecision": {"type": "object", "required": ["decision"], "properties": {
                     "decision": {"enum": ["approve", "reject", "reset"]}, "reason": {"type": "string", "maxLength": 256},
                     "revision": {"type": "integer", "description": "the frame revision the curator saw; stale → 409"}}},
