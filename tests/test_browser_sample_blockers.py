@@ -12,7 +12,8 @@ import pytest
 from sqlalchemy import update
 
 from dataset.db import migrate, transaction
-from dataset.models import Frame, FrameState, Role
+from dataset.models import Frame, FrameState, JobState, Role
+from dataset.services import jobs as job_service
 from dataset.services import users as user_service
 from tests.browser import collect_errors, login, serving
 from tests.conftest import PASSWORD, make_settings
@@ -104,5 +105,19 @@ def test_ingest_review_and_annotate_say_why_no_samples(browser, tmp_path: Path) 
         page.mouse.up()
         page.wait_for_function("() => !window.annotator.dirty", timeout=10_000)  # no stale-version conflict
         expect(page.locator("#message")).not_to_contain_text("changed since")
+        context.close()
+
+        # a generate job that failed anyway: the Dashboard counts it, and the retry says what still blocks it
+        with transaction(rt.sessions) as s:
+            s.execute(update(Frame).where(Frame.id == frame_id).values(state=FrameState.annotated))
+            job = job_service.create_job(s, "generate", {"frame_id": frame_id}, None)
+            job.state, job.error = JobState.failed, "no monocular disparity"
+        context = browser.new_context(viewport=VIEWPORT)
+        page = context.new_page()
+        errors += collect_errors(page)
+        login(page, url, "curator", PASSWORD)
+        expect(page.locator("#generate-failed")).to_contain_text("1 annotated frame has no sample")
+        page.click("#retry-generates")
+        expect(page.locator("#retry-generates-result")).to_contain_text("Queued 0 again. 1 still cannot: this workspace")
         context.close()
     assert errors == [], errors

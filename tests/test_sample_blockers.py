@@ -109,6 +109,7 @@ def test_the_dashboard_counts_them(client, plain, runtime) -> None:  # type: ign
         job.state, job.error = JobState.failed, "no monocular disparity"
     page = client.get("/").get_data(as_text=True)
     assert 'id="generate-failed"' in page and "1 annotated frame\n" in page and "?state=failed" in page
+    assert "id=\"retry-generates\"" in page  # a curator retries them from here
 
 
 def test_a_video_brings_its_own_depth_with_mono(runtime: Runtime, tmp_path: Path) -> None:
@@ -211,3 +212,21 @@ def test_an_upload_brings_its_own_depth(client, tokens, runtime, tmp_path: Path)
         frames = s.scalars(select(Frame).order_by(Frame.index)).all()
         assert len(frames) == 2 and all(MONO_ASSET in f.assets for f in frames)
         assert s.get(Video, frames[0].video_id).meta["mono"] == "precomputed"
+
+
+def test_failed_generates_are_retried_once_their_cause_is_fixed(client, tokens, plain, runtime) -> None:  # type: ignore[no-untyped-def]
+    with transaction(runtime.sessions) as s:
+        s.execute(update(Frame).where(Frame.id == plain).values(state=FrameState.annotated))
+        job = job_service.create_job(s, "generate", {"frame_id": plain, "annotation_version": 1}, None)
+        job.state, job.error = JobState.failed, "no monocular disparity"
+    assert client.post("/api/v1/generate/retry-failed", headers=auth(tokens)).status_code == 403
+    still = client.post("/api/v1/generate/retry-failed", headers=auth(tokens, "curator"))
+    assert still.status_code == 200 and still.json["retried"] == []
+    assert still.json["still_blocked"][0]["frame_ids"] == [plain] and "depth" in still.json["still_blocked"][0]["reason"]
+    with transaction(runtime.sessions) as s:  # its depth imported since
+        frame = s.get(Frame, plain)
+        frame.assets = {**frame.assets, "precomputed_disparity": frame.media_key}
+    done = client.post("/api/v1/generate/retry-failed", headers=auth(tokens, "curator")).json
+    assert done == {"retried": [job.id], "still_blocked": []}
+    with runtime.sessions() as s:
+        assert s.get(Job, job.id).state == JobState.queued and failed_generate(s, s.get(Frame, plain)) is None

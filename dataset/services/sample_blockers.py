@@ -10,6 +10,7 @@ that failed anyway are found by :func:`failed_generate`, so a frame shows why it
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from sqlalchemy import Select, func, select
@@ -134,3 +135,21 @@ def with_failures(session: Session, items: list[dict[str, Any]]) -> list[dict[st
     for item in items:
         item["generate_failed"] = failed.get(item["id"])
     return items
+
+
+def retry_failed_generates(session: Session, settings: Settings,
+                           retry: Callable[[Session, int], Any]) -> dict[str, Any]:
+    """Queue again, through ``retry`` (the job queue's), every failed last generate job whose frame can
+    become a sample now (its cause fixed: a depth model configured, its depth imported); the others stay,
+    grouped by the reason (``{"retried": [job ids], "still_blocked": [{"reason", "frame_ids"}]}``)."""
+    retried: list[int] = []
+    blocked: dict[str, list[int]] = {}
+    for frame_id, job in session.execute(_failed_last_jobs()).all():
+        reason = frame_blocker(session, settings, session.get(Frame, frame_id))
+        if reason is not None:
+            blocked.setdefault(reason, []).append(frame_id)
+            continue
+        retry(session, job.id)
+        retried.append(job.id)
+    return {"retried": retried,
+            "still_blocked": [{"reason": reason, "frame_ids": ids} for reason, ids in blocked.items()]}

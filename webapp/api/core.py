@@ -109,6 +109,15 @@ def get_job(job_id: int) -> ResponseReturnValue:
     return job_service.job_json(job, with_log=True)
 
 
+@api.post("/generate/retry-failed")
+@requires(Role.curator)
+def retry_failed_generates() -> ResponseReturnValue:
+    """Retry the failed generate jobs of annotated frames that can become samples now."""
+    result = sample_blockers.retry_failed_generates(g.db, runtime().settings, runtime().queue.retry)
+    g.db.commit()
+    return result
+
+
 @api.post("/jobs/<int:job_id>/retry")
 @requires(Role.curator)
 def retry_job(job_id: int) -> ResponseReturnValue:

@@ -207,6 +207,10 @@ def openapi_document() -> dict[str, Any]:
             "/jobs": {"get": _op("List jobs (annotators: their own)", "annotator", schema="JobList",
                                  params=[_q("state", "string"), _q("limit", desc="1..500, default 50"), *_CURSORS])},
             "/jobs/{job_id}": {"get": _op("One job with its log", "annotator", params=[_JOB_ID], schema="Job")},
+            "/generate/retry-failed": {"post": _op(
+                "Queue again every failed generate job of an annotated frame that can become a sample now (its "
+                "cause fixed); the others are named with the reason", "curator", schema="GenerateRetry",
+                errors=_QUEUE_DOWN)},
             "/jobs/{job_id}/retry": {"post": _op(
                 "Retry a failed or interrupted job (a training job: admins, and it resumes the run)", "curator",
                 params=[_JOB_ID], ok="202", schema="Job",
@@ -291,6 +295,11 @@ def openapi_document() -> dict[str, Any]:
                     "sparse": {"type": "boolean", "description": "the authors' sparse mode"}}},
                 "UploadJob": {"allOf": [_ref("Job"), {"type": "object", "properties": {
                     "sample_blocker": _SAMPLE_BLOCKER}}]},
+                "GenerateRetry": {"type": "object", "properties": {
+                    "retried": {"type": "array", "items": {"type": "integer"}, "description": "the jobs queued again"},
+                    "still_blocked": {"type": "array", "items": {"type": "object", "properties": {
+                        "reason": {"type": "string"}, "frame_ids": {"type": "array", "items": {"type": "integer"}}}},
+                        "description": "frames that still cannot become samples, by the reason"}}},
                 "JobBatch": {"type": "object", "properties": {"jobs": {"type": "array", "items": _ref("Job")}}},
                 "VideoList": {"type": "object", "properties": {"items": {"type": "array", "items": {"type": "object"}},
                                                                "prev": _PAGED["prev"], "next": _PAGED["next"]}},
