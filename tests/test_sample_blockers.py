@@ -230,3 +230,20 @@ def test_failed_generates_are_retried_once_their_cause_is_fixed(client, tokens, 
     assert done == {"retried": [job.id], "still_blocked": []}
     with runtime.sessions() as s:
         assert s.get(Job, job.id).state == JobState.queued and failed_generate(s, s.get(Frame, plain)) is None
+
+
+def test_cli_retry_generates_names_what_still_blocks(tmp_path: Path) -> None:
+    from tests.test_cli import cli
+
+    home = tmp_path / "ws"
+    assert cli("--data-dir", str(home), "init").returncode == 0
+    rt = Runtime(make_settings(home))
+    run_ingest(rt, write_avi(tmp_path / "v.avi", 2), fps=None, dedup_hamming=None)
+    with transaction(rt.sessions) as s:
+        frame_id = s.scalar(select(Frame.id))
+        s.execute(update(Frame).values(state=FrameState.annotated))
+        job = job_service.create_job(s, "generate", {"frame_id": frame_id}, None)
+        job.state = JobState.failed
+    result = cli("--data-dir", str(home), "jobs", "retry-generates")
+    assert result.returncode == 0 and "queued 0 generate jobs again" in result.stdout
+    assert f"1 frame still cannot ({frame_id})" in result.stderr and "depth" in result.stderr
