@@ -112,7 +112,7 @@ async function uploadAll() {
       const job = await upload(file, fields, (f) => { row.querySelector("progress").value = f; });
       row.querySelector("progress").value = 0;
       if (job.sample_blocker) {
-        row.append(el("span", { className: "copy-note sample-blocker" }, `No samples from this video: ${job.sample_blocker}`));
+        row.append(el("span", { className: "sample-blocker" }, `No samples from this video: ${job.sample_blocker}`));
       }
       follow(job, row);
     } catch (err) {
