@@ -17,10 +17,9 @@ from sqlalchemy import Select, func, select
 from sqlalchemy.orm import Session
 
 from dataset.models import Annotation, Frame, FrameState, Job, JobState, Video
+from dataset.redact import shown
 from dataset.settings import Settings
 
-# Frame assets that hold a disparity of the frame's own, in the order generation prefers them.
-OWN_DEPTH_ASSETS = ("reconstruction_disparity", "precomputed_disparity")
 GENERATE_JOB = "generate"
 
 
@@ -68,7 +67,12 @@ def failed_generate(session: Session, frame: Frame) -> dict[str, Any] | None:
                          .order_by(Job.id.desc()).limit(1))
     if job is None or job.state not in (JobState.failed, JobState.interrupted):
         return None
-    return {"job_id": job.id, "error": job.error,
+    return _failure_json(job)
+
+
+def _failure_json(job: Job) -> dict[str, Any]:
+    # A job's error comes from outside the app's own answers (tracebacks, paths): shown as job answers show it.
+    return {"job_id": job.id, "error": shown(job.error),
             "finished_at": job.finished_at.isoformat() + "Z" if job.finished_at else None}
 
 
@@ -94,7 +98,7 @@ def failed_generates_of(session: Session, user_id: int, *, other_than: int | Non
     query = _failed_last_jobs().join(Annotation, Annotation.frame_id == Frame.id).where(Annotation.user_id == user_id)
     if other_than is not None:
         query = query.where(Frame.id != other_than)
-    return [{"frame_id": fid, "job_id": job.id, "error": job.error}
+    return [{"frame_id": fid, "job_id": job.id, "error": shown(job.error)}
             for fid, job in session.execute(query.limit(limit)).all()]
 
 
@@ -129,9 +133,8 @@ def with_failures(session: Session, items: list[dict[str, Any]]) -> list[dict[st
     """``items`` (frame JSON with ``id`` and ``state``) with ``generate_failed`` (see :func:`failed_generate`):
     the frames browser marks the annotated frames whose sample could not be made."""
     ids = [item["id"] for item in items if item.get("state") == FrameState.annotated.value]
-    failed = {fid: {"job_id": job.id, "error": job.error,
-                    "finished_at": job.finished_at.isoformat() + "Z" if job.finished_at else None}
-              for fid, job in session.execute(_failed_last_jobs().where(Frame.id.in_(ids))).all()} if ids else {}
+    failed = ({fid: _failure_json(job) for fid, job in session.execute(_failed_last_jobs().where(Frame.id.in_(ids))).all()}
+              if ids else {})
     for item in items:
         item["generate_failed"] = failed.get(item["id"])
     return items
