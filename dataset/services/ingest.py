@@ -34,6 +34,7 @@ from dataset.wording import plural, quoted
 DEFAULT_FPS = 2.0  # the paper's sampling rate
 DEFAULT_DEDUP_HAMMING = 4
 MONO_SUFFIXES = (".pfm", ".npy")
+MISSING_SHOWN = 100  # frames without a disparity that a job's result names (its log says how many)
 # The frame asset the precomputed depth backend reads (dataset.services.generate.mono_disparity).
 MONO_ASSET = "precomputed_disparity"
 
@@ -122,9 +123,10 @@ def _ingest(ctx: JobContext, p: dict[str, Any]) -> dict[str, Any]:
         video = s.scalar(select(Video).where(Video.content_sha256 == info.fingerprint))
         if video is not None and video.meta.get("ingest") == "complete":
             n = s.scalar(select(func.count()).select_from(Frame).where(Frame.video_id == video.id))
-            ctx.log(f"already ingested as video {video.id}; nothing to do")
+            ctx.log(f"already ingested as video {video.id}; nothing to do"
+                    + ("; its monocular disparities were not imported (its frames are stored already)" if mono else ""))
             return {"video_id": video.id, "video_name": video.name, "frames": n, "new_frames": 0,
-                    "dropped_duplicates": 0, "skipped": True}
+                    "dropped_duplicates": 0, "skipped": True, **({"mono_ignored": True} if mono else {})}
         if video is None:
             video = Video(
                 name=p.get("original_name") or Path(p["path"]).name,
@@ -188,7 +190,7 @@ def _ingest(ctx: JobContext, p: dict[str, Any]) -> dict[str, Any]:
                 f"of {kept} frames alike): kept in the same scene group, so no split separates them")
     return {"video_id": video_id, "video_name": video_name, "frames": kept, "new_frames": new,
             "dropped_duplicates": dropped, **({"copy_of": copy_of} if copy_of else {}),
-            **({"mono_frames": kept - len(mono_missing), "mono_missing": mono_missing} if mono else {})}
+            **({"mono_frames": kept - len(mono_missing), "mono_missing": mono_missing[:MISSING_SHOWN]} if mono else {})}
 
 
 def _mono_asset(ctx: JobContext, source: tuple[Path, str] | None, frame: DecodedFrame) -> dict[str, str]:
