@@ -96,7 +96,8 @@ def mono_disparity(settings: Settings, media: MediaStore, frame: Frame, video: V
                               "note": "a synthetic scene's simulated monocular estimate (relative, coarse, fooled "
                                       "by pictures and partly by mirrors), not a model's"})
     raise GenerationError(f"frame {frame.id} has no monocular disparity: set depth_backend = 'depth-anything-v2' "
-                          "with depth_model_path, or import precomputed disparities with the frames")
+                          "with depth_model_path, or import precomputed disparities with the frames "
+                          "(illusion-studio ingest --mono DIR); then retry this job")
 
 
 def generate_job(ctx: JobContext) -> dict[str, Any]:

@@ -45,3 +45,20 @@ keyboardHelp([
   ...[...proposers.tHead.rows[0].cells].map((th) => [th.textContent, th.title]),
 ], { note: "The figures follow the pipeline live (every 5 s). A frame counts at every stage it has reached, "
           + "so each bar is at most the one above it." });
+
+// Failed generate jobs, retried once their cause is fixed: the server queues those whose frames can become
+// samples now and names the reason the others still cannot.
+const retry = document.getElementById("retry-generates");
+retry?.addEventListener("click", async () => {
+  retry.disabled = true;
+  const out = document.getElementById("retry-generates-result");
+  try {
+    const result = await api(retry.dataset.src, { method: "POST" });
+    const still = result.still_blocked.map((b) => `${b.frame_ids.length} still cannot: ${b.reason}`);
+    out.textContent = ` Queued ${result.retried.length} again.${still.length ? ` ${still.join(" ")}` : ""}`;
+  } catch (err) {
+    out.textContent = ` ${err.message}`;
+  } finally {
+    retry.disabled = false;
+  }
+});

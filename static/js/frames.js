@@ -18,7 +18,10 @@ function tile(frame) {
     el("a", { href: grid.dataset.open + frame.id, title: `Open ${place}` },
       el("img", { src: grid.dataset.media + (frame.thumb ?? frame.image), loading: "lazy", alt: `frame #${frame.id}`,
                   width: 240 }),
-      el("span", { className: "caption" }, `${place} · `, el("span", { className: `state ${frame.state}` }, frame.state))));
+      el("span", { className: "caption" }, `${place} · `, el("span", { className: `state ${frame.state}` }, frame.state),
+         // an annotated frame whose sample could not be made: why, on the tile (its job has the retry)
+         frame.generate_failed ? el("span", { className: "sample-blocker", title: frame.generate_failed.error ?? "" },
+                                    ` · no sample: ${frame.generate_failed.error ?? "generate failed"}`) : "")));
 }
 
 function draw(page) {

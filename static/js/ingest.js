@@ -88,6 +88,12 @@ form.addEventListener("submit", async (event) => {
 
 async function uploadAll() {
   const files = [...form.elements.file.files];
+  // The disparities are one video's, sent with it (they are in `fields`, as the form's "mono" entries).
+  if (form.elements.mono.files.length && files.length > 1) {
+    list.prepend(el("li", { className: "failed" }, el("span", { className: "status" },
+      `Not uploaded: the monocular disparities are one video's, but ${files.length} videos are chosen.`)));
+    return;
+  }
   // An unchecked box sends nothing, and the API's default is to prefilter: always say it explicitly.
   const fields = [...new FormData(form)].filter(([key]) => !["file", "prefilter"].includes(key));
   fields.push(["prefilter", form.elements.prefilter.checked ? "1" : "0"]);
@@ -105,6 +111,9 @@ async function uploadAll() {
     try {
       const job = await upload(file, fields, (f) => { row.querySelector("progress").value = f; });
       row.querySelector("progress").value = 0;
+      if (job.sample_blocker) {
+        row.append(el("span", { className: "sample-blocker" }, `No samples from this video: ${job.sample_blocker}`));
+      }
       follow(job, row);
     } catch (err) {
       row.querySelector(".status").textContent = sessionEnded(err) ? "not uploaded" : err.message;

@@ -21,6 +21,9 @@ export function frameTile(node, item, { media, questions, settled }) {
        el("span", { className: `badge verdict ${verdictOf(item.prefilter_keep).replace(" ", "-")}`,
                     title: item.prefilter?.reason ?? "" }, `VLM ${verdictOf(item.prefilter_keep)}`)),
     el("div", { className: "meta" }, framePlace(item), lastReview(item)),
+    // An approval would send the frame to annotators for nothing: say why before anyone works on it.
+    item.sample_blocker ? el("p", { className: "sample-blocker", role: "note", title: item.sample_blocker },
+                             "No samples: ", item.sample_blocker) : "",
     answerChips(questions, item.prefilter?.answers),
     metricList(item.prefilter?.metrics ?? {}),
   );

@@ -10,7 +10,7 @@ from flask_login import current_user
 
 from dataset.formats import FormatError, mask_to_rle, rle_to_mask
 from dataset.models import Frame, RegionKind, Role, User
-from dataset.services import annotate, leases, proposals, sample_review, segmentation
+from dataset.services import annotate, leases, proposals, sample_blockers, sample_review, segmentation
 from dataset.services import jobs as job_service
 from dataset.services.errors import InvalidInput, NotFound, Unavailable
 from dataset.services.validate import db_int, optional_text
@@ -62,7 +62,9 @@ def annotate_next() -> ResponseReturnValue:
 @requires(Role.annotator)
 def frame_detail(frame_id: int) -> ResponseReturnValue:
     detail = annotate.frame_detail(g.db, frame_id, current_user)
-    detail["embedding_ready"] = segmentation.embedding_ready(runtime().settings, g.db.get(Frame, frame_id))
+    frame = g.db.get(Frame, frame_id)
+    detail["embedding_ready"] = segmentation.embedding_ready(runtime().settings, frame)
+    detail.update(sample_blockers.frame_sample_status(g.db, runtime().settings, frame, current_user.id))
     return {**detail, **proposals.frame_proposals(g.db, runtime().settings, frame_id)}
 
 
@@ -113,8 +115,17 @@ def save_annotation(frame_id: int) -> ResponseReturnValue:
     body = json_body(many_masks=True, max_values=annotate.DRAFT_VALUES)
     version = db_int(body.get("version"), "version (the annotation_version you loaded)", minimum=0)
     submit = bool(body.get("submit", True))
+    # A frame that cannot become a sample is not submitted: its regions are kept as a draft, and the
+    # refusal says why, before the generate job would fail on it.
+    blocker = sample_blockers.frame_blocker(g.db, runtime().settings, get_or_404(Frame, frame_id, "frame")) \
+        if submit else None
     ann = annotate.save_annotation(g.db, frame_id, current_user, version=version, regions=body.get("regions", []),
-                                   illusion_type=body.get("illusion_type"), submit=submit)
+                                   illusion_type=body.get("illusion_type"), submit=submit and blocker is None)
+    if blocker:
+        g.db.commit()
+        return {"error": f"not submitted (your regions are saved as a draft): {blocker}", "status": 409,
+                "sample_blocker": blocker, "frame_id": frame_id, "annotation_version": ann.version,
+                "submitted": False, "state": g.db.get(Frame, frame_id).state.value}, 409
     if submit:
         runtime().submit(g.db, "generate", {"frame_id": frame_id, "annotation_version": ann.version},
                          g.db.get(User, current_user.id))

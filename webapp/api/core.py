@@ -12,7 +12,7 @@ from sqlalchemy.orm import defer, joinedload
 
 from dataset.models import Job, JobState, Role, User
 from dataset.services import jobs as job_service
-from dataset.services import training
+from dataset.services import sample_blockers, training
 from dataset.services import users as user_service
 from dataset.services.errors import InvalidInput, NotFound
 from dataset.services.frames import frames_page, funnel_counts, parse_state
@@ -63,7 +63,7 @@ def frames() -> ResponseReturnValue:
         g.db, video_id=int_arg("video_id"), state=parse_state(state) if state else None,
         limit=int_arg("limit", 100, minimum=1, maximum=500), offset=int_arg("offset", 0, minimum=0), **cursor_args(),
     )
-    return {"items": items, "total": total, "prev": page.prev, "next": page.next}
+    return {"items": sample_blockers.with_failures(g.db, items), "total": total, "prev": page.prev, "next": page.next}
 
 
 @api.get("/stats/funnel")
@@ -107,6 +107,15 @@ def get_job(job_id: int) -> ResponseReturnValue:
     if job is None:
         raise NotFound(f"no job {job_id}")
     return job_service.job_json(job, with_log=True)
+
+
+@api.post("/generate/retry-failed")
+@requires(Role.curator)
+def retry_failed_generates() -> ResponseReturnValue:
+    """Retry the failed generate jobs of annotated frames that can become samples now."""
+    result = sample_blockers.retry_failed_generates(g.db, runtime().settings, runtime().queue.retry)
+    g.db.commit()
+    return result
 
 
 @api.post("/jobs/<int:job_id>/retry")

@@ -105,6 +105,14 @@ _CHECKPOINT = {"name": "name", "in": "path", "required": True, "schema": {"type"
                "description": "a file name from the run's checkpoints (best.pt, step_0001000.pt, …)"}
 
 
+_SAMPLE_BLOCKER = {"type": ["string", "null"],
+                   "description": "why this workspace cannot make samples of the video's frames (no depth model "
+                                  "configured and no depth of the video's own), or null when it can"}
+_GENERATE_FAILED = {"type": ["object", "null"],
+                    "description": "the frame's last generate job, when it failed and the frame still has no sample: "
+                                   "job_id, error, finished_at (POST /jobs/{job_id}/retry once the cause is fixed)"}
+
+
 def openapi_document() -> dict[str, Any]:
     """The document ``/api/v1/openapi.json`` serves: every operation with each status and content type it answers."""
     return {
@@ -127,7 +135,7 @@ def openapi_document() -> dict[str, Any]:
                 "get": _op("List videos with their frame counts, newest first", "annotator", schema="VideoList",
                            params=[_q("limit", desc="1..1000, default 100"), *_CURSORS]),
                 "post": _op("Upload a video (multipart: file, fps, source, illusion_type…); starts an ingest job",
-                            "curator", body="VideoUpload", body_type="multipart/form-data", ok="202", schema="Job",
+                            "curator", body="VideoUpload", body_type="multipart/form-data", ok="202", schema="UploadJob",
                             errors=_QUEUE_DOWN),
             },
             "/prefilter": {"post": _op("Queue VLM prefilter jobs for unclaimed ingested frames", "curator",
@@ -162,7 +170,9 @@ def openapi_document() -> dict[str, Any]:
                 "Save (submit=false: a draft) or submit the regions; a stale version is a 409", "annotator",
                 params=[_FRAME_ID], body="AnnotationSave", schema="AnnotationSaved",
                 errors={"409": "the annotation changed since `version`, someone else holds the frame, or it is not "
-                               "approved; nothing was written",
+                               "approved; nothing was written. Or a submit of a frame that cannot become a sample: "
+                               "the regions are saved as a draft, and the answer (an AnnotationSaved with `error` "
+                               "and `sample_blocker`) says why",
                         "503": "submitting queues the sample's generation, and the job queue is unreachable: nothing "
                                "was written; try again in a minute"})},
             "/frames/{frame_id}/proposals/{proposal_id}/reject": {"post": _op(
@@ -197,6 +207,10 @@ def openapi_document() -> dict[str, Any]:
             "/jobs": {"get": _op("List jobs (annotators: their own)", "annotator", schema="JobList",
                                  params=[_q("state", "string"), _q("limit", desc="1..500, default 50"), *_CURSORS])},
             "/jobs/{job_id}": {"get": _op("One job with its log", "annotator", params=[_JOB_ID], schema="Job")},
+            "/generate/retry-failed": {"post": _op(
+                "Queue again every failed generate job of an annotated frame that can become a sample now (its "
+                "cause fixed); the others are named with the reason", "curator", schema="GenerateRetry",
+                errors=_QUEUE_DOWN)},
             "/jobs/{job_id}/retry": {"post": _op(
                 "Retry a failed or interrupted job (a training job: admins, and it resumes the run)", "curator",
                 params=[_JOB_ID], ok="202", schema="Job",
@@ -270,7 +284,7 @@ def openapi_document() -> dict[str, Any]:
                     "time_s": {"type": "number", "description": "seconds into the video"},
                     "width": {"type": "integer"}, "height": {"type": "integer"}, "state": {"type": "string"},
                     "revision": {"type": "integer"}, "image": {"type": "string", "description": "media key; GET /media/{key}"},
-                    "prefilter_keep": {"type": ["boolean", "null"]}}},
+                    "prefilter_keep": {"type": ["boolean", "null"]}, "generate_failed": _GENERATE_FAILED}},
                 "FrameList": _list("Frame", **_PAGED),
                 "Funnel": {"type": "object", "additionalProperties": {"type": "integer"}},
                 "Job": {"type": "object", "properties": {
@@ -283,6 +297,13 @@ def openapi_document() -> dict[str, Any]:
                 "PrefilterRequest": {"type": "object", "properties": {
                     "video_id": {"type": "integer"}, "backend": {"enum": ["heuristic", "openai", "transformers"]},
                     "sparse": {"type": "boolean", "description": "the authors' sparse mode"}}},
+                "UploadJob": {"allOf": [_ref("Job"), {"type": "object", "properties": {
+                    "sample_blocker": _SAMPLE_BLOCKER}}]},
+                "GenerateRetry": {"type": "object", "properties": {
+                    "retried": {"type": "array", "items": {"type": "integer"}, "description": "the jobs queued again"},
+                    "still_blocked": {"type": "array", "items": {"type": "object", "properties": {
+                        "reason": {"type": "string"}, "frame_ids": {"type": "array", "items": {"type": "integer"}}}},
+                        "description": "frames that still cannot become samples, by the reason"}}},
                 "JobBatch": {"type": "object", "properties": {"jobs": {"type": "array", "items": _ref("Job")}}},
                 "VideoList": {"type": "object", "properties": {"items": {"type": "array", "items": {"type": "object"}},
                                                                "prev": _PAGED["prev"], "next": _PAGED["next"]}},
@@ -290,13 +311,20 @@ def openapi_document() -> dict[str, Any]:
                     "file": {"type": "string", "format": "binary"}, "fps": {"type": "number"},
                     "source": {"enum": ["web", "generated", "real_capture"]},
                     "prefilter": {"type": "boolean", "description": "queue the VLM prefilter afterwards (default true)"},
-                    "illusion_type": {"type": "array", "items": {"enum": _ILLUSION_TYPES}}}},
+                    "illusion_type": {"type": "array", "items": {"enum": _ILLUSION_TYPES}},
+                    "mono": {"type": "array", "items": {"type": "string", "format": "binary"},
+                             "description": "the video's per-frame monocular disparities (.npy or .pfm, float HxW, "
+                                            "larger = nearer), each named by its frame's index in the decoded video "
+                                            "(frame_000012.npy): its frames can then become samples without a "
+                                            "depth model"}}},
                 "ReviewDecision": {"type": "object", "required": ["decision"], "properties": {
                     "decision": {"enum": ["approve", "reject", "reset"]}, "reason": {"type": "string", "maxLength": 256},
                     "revision": {"type": "integer", "description": "the frame revision the curator saw; stale → 409"}}},
                 "ReviewItem": {"allOf": [_ref("Frame"), {"type": "object", "properties": {
                     "thumb": {"type": "string"}, "prefilter": {"type": ["object", "null"]},
-                    "last_review": {"type": ["object", "null"]}}}]},
+                    "last_review": {"type": ["object", "null"]},
+                    "sample_blocker": {**_SAMPLE_BLOCKER, "description": "in the review grid's items: "
+                                                                          + _SAMPLE_BLOCKER["description"]}}}]},
                 "ReviewPage": _list("ReviewItem", **_PAGED, reasons={"type": "array"}, questions={"type": "array"},
                                     total_exact={"type": "boolean",
                                                  "description": "false: total is a lower bound (a question filter)"}),
@@ -325,7 +353,9 @@ def openapi_document() -> dict[str, Any]:
                                                                 "state": {"type": "string"}}},
                 "AnnotationSaved": {"type": "object", "properties": {
                     "frame_id": {"type": "integer"}, "annotation_version": {"type": "integer"},
-                    "submitted": {"type": "boolean"}, "state": {"type": "string", "description": "the frame's"}}},
+                    "submitted": {"type": "boolean"}, "state": {"type": "string", "description": "the frame's"},
+                    "sample_blocker": {**_SAMPLE_BLOCKER, "description": "only in a refused submit's 409: why the "
+                                                                          "frame cannot become a sample"}}},
                 "Lease": {"type": "object", "properties": {"frame_id": {"type": "integer"},
                                                            "lease_expires": {"type": "string", "format": "date-time"},
                                                            "returned_waiting": _RETURNED_WAITING}},
@@ -339,7 +369,12 @@ def openapi_document() -> dict[str, Any]:
                     "next_id": {"type": ["integer", "null"]}, "embedding_ready": {"type": "boolean"},
                     "proposals": {"type": "array", "items": _ref("Proposal")},
                     "proposals_ready": {"type": "boolean", "description": "every configured proposer has looked"},
-                    "proposals_note": {"type": "string", "description": "why there are no proposals (empty if any)"}}}]},
+                    "proposals_note": {"type": "string", "description": "why there are no proposals (empty if any)"},
+                    "sample_blocker": _SAMPLE_BLOCKER,
+                    "generate_failed": _GENERATE_FAILED,
+                    "failed_elsewhere": {"type": "array", "items": {"type": "object"},
+                                         "description": "the caller's other submitted frames whose generate job "
+                                                        "failed: frame_id, job_id, error (newest first, at most 5)"}}}]},
                 "Proposal": {"type": "object", "properties": {
                     "id": {"type": "integer"}, "source": {"type": "string"}, "score": {"type": "number"},
                     "illusion_type": {"enum": [*_ILLUSION_TYPES, None]}, "guess": {"type": ["string", "null"]},

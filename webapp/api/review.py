@@ -9,11 +9,13 @@ from flask_login import current_user
 from annotation.vlm import QUESTION_LABELS
 from dataset.models import Role
 from dataset.services import review as review_service
+from dataset.services import sample_blockers
 from dataset.services.errors import Conflict
 from dataset.services.validate import db_int, optional_text
 from webapp.api.annotate import queue_proposals
 from webapp.api.blueprint import api, cursor_args, int_arg, json_body
 from webapp.auth import requires
+from webapp.runtime import runtime
 
 
 @api.get("/review/frames")
@@ -23,7 +25,8 @@ def review_frames() -> ResponseReturnValue:
         g.db, video_id=int_arg("video_id"), state=request.args.get("state", "prefiltered"),
         keep=request.args.get("keep") or None, question=int_arg("question"), answer=request.args.get("answer") or None,
         limit=int_arg("limit", 60, minimum=1, maximum=500), offset=int_arg("offset", 0, minimum=0), **cursor_args())
-    return {"items": listing.items, "total": listing.total, "total_exact": listing.total_exact,
+    items = sample_blockers.with_blockers(g.db, runtime().settings, listing.items)
+    return {"items": items, "total": listing.total, "total_exact": listing.total_exact,
             "prev": listing.prev, "next": listing.next, "reasons": list(review_service.REJECT_REASONS),
             "questions": list(QUESTION_LABELS)}
 

@@ -15,9 +15,10 @@ from dataset.ingest.sources import VIDEO_EXTENSIONS, image_kind
 from dataset.models import FrameCount, Role, User, Video
 from dataset.services import jobs as job_service
 from dataset.services.errors import InvalidInput
-from dataset.services.ingest import DEFAULT_DEDUP_HAMMING, ingest_params
+from dataset.services.ingest import DEFAULT_DEDUP_HAMMING, ingest_params, mono_index
 from dataset.services.paging import keyset_page
 from dataset.services.prefilter import launch_prefilter
+from dataset.services.sample_blockers import sample_blocker
 from dataset.services.validate import db_int
 from webapp.api.blueprint import api, cursor_args, int_arg, json_body
 from webapp.auth import requires
@@ -46,7 +47,11 @@ MAX_FILE_NAME = 255
 @api.post("/videos")
 @requires(Role.curator)
 def upload_video() -> ResponseReturnValue:
-    """Multipart upload: ``file`` plus optional ``fps``, ``source``, ``illusion_type`` (repeatable)."""
+    """Multipart upload: ``file`` plus optional ``fps``, ``source``, ``illusion_type`` (repeatable) and
+    ``mono`` (repeatable): the video's per-frame monocular disparities, named by frame index.
+
+    The answer is the ingest job's, with ``sample_blocker``: why this workspace cannot make samples of
+    the video's frames (no depth model, and no ``mono`` maps), or None."""
     upload = request.files.get("file")
     if upload is None or not upload.filename:
         raise InvalidInput("send the video as the multipart field 'file'")
@@ -73,6 +78,8 @@ def upload_video() -> ResponseReturnValue:
         raise InvalidInput("fps must be a number") from None
     if not 0 <= fps <= 1000:
         raise InvalidInput("fps must be in 0..1000 (0: every frame)")
+    maps = [m for m in request.files.getlist("mono") if m.filename]
+    mono = mono_index([Path(m.filename).name for m in maps])  # refused before anything is stored
     params = ingest_params("", fps=fps or None, source=request.form.get("source") or None,
                            illusion_types=request.form.getlist("illusion_type"),
                            dedup_hamming=DEFAULT_DEDUP_HAMMING, user_id=current_user.id, original_name=name,
@@ -81,10 +88,18 @@ def upload_video() -> ResponseReturnValue:
     check_reachable(rt.queue.hueys[queue_for("ingest")])
     key = rt.media.put_stream(upload.stream, ext)
     params["path"] = str(rt.media.path(key))
+    stored = []
+    for index, upload_map in zip(mono, maps, strict=True):  # mono_index keeps the maps' order
+        name = mono[index]
+        stored.append([index, str(rt.media.path(rt.media.put_stream(upload_map.stream, Path(name).suffix))), name])
+    if stored:
+        params["mono_files"] = stored
     user = g.db.get(User, current_user.id)
     job = rt.queue.submit(g.db, "ingest", params, user)
     g.db.commit()
-    return job_service.job_json(job), 202
+    # The maps make the video's own depth: an upload without them has none.
+    own = Video(meta={"mono": "precomputed"}) if maps else None
+    return {**job_service.job_json(job), "sample_blocker": sample_blocker(rt.settings, own)}, 202
 
 
 @api.post("/prefilter")

@@ -12,9 +12,11 @@ import click
 
 from dataset.db import transaction
 from dataset.ingest import IngestError, find_sources
-from dataset.models import FrameState, IllusionType, Job, SourceKind
+from dataset.ingest.sources import SCENE_FILE
+from dataset.models import FrameState, IllusionType, Job, SourceKind, Video
 from dataset.services.frames import list_frames
 from dataset.services.ingest import DEFAULT_DEDUP_HAMMING, DEFAULT_FPS, ingest_params
+from dataset.services.sample_blockers import sample_blocker
 from dataset.wording import plural
 from webapp.cli.errors import service_errors
 from webapp.cli.state import CliState, pass_state
@@ -33,10 +35,14 @@ NO_WORKER_HINT_S = 10.0
               help="Drop a frame within this many dHash bits of the last kept one (-1: keep all).")
 @click.option("--prefilter/--no-prefilter", default=False, show_default=True,
               help="Queue the VLM prefilter for the new frames once a video is ingested.")
+@click.option("--mono", "mono_dir", type=click.Path(path_type=Path, file_okay=False), default=None,
+              help="A folder of the video's per-frame monocular disparities (.pfm/.npy, float HxW, larger = "
+                   "nearer; each name ends with its frame's index, e.g. frame_000012.npy): its frames can then "
+                   "become samples without a depth model (the precomputed backend). One video only.")
 @click.option("--wait", is_flag=True, help="Wait for the jobs, show progress, exit non-zero if one fails.")
 @pass_state
 def ingest(state: CliState, paths: tuple[Path, ...], fps: float, source: str | None,
-           illusion_types: tuple[str, ...], dedup: int, prefilter: bool, wait: bool) -> None:
+           illusion_types: tuple[str, ...], dedup: int, prefilter: bool, mono_dir: Path | None, wait: bool) -> None:
     """Queue video files, folders of videos, or synthetic scenes for ingest (a worker decodes them)."""
     try:
         sources = find_sources(list(paths))
@@ -44,15 +50,27 @@ def ingest(state: CliState, paths: tuple[Path, ...], fps: float, source: str | N
         raise click.ClickException(str(exc)) from None
     if not sources:
         raise click.ClickException("no video files or synthetic scenes found under the given paths")
+    if mono_dir is not None and len(sources) != 1:
+        raise click.ClickException(f"--mono is one video's disparities, but {len(sources)} videos were given")
     rt = state.runtime
     with service_errors(), transaction(rt.sessions) as s:
         job_ids = [rt.queue.submit(s, "ingest", ingest_params(
             str(p), fps=fps or None, source=source, illusion_types=list(illusion_types),
-            dedup_hamming=None if dedup < 0 else dedup, prefilter=prefilter), None).id for p in sources]
+            dedup_hamming=None if dedup < 0 else dedup, prefilter=prefilter,
+            mono_dir=str(mono_dir.resolve()) if mono_dir else None), None).id for p in sources]
     for path, job_id in zip(sources, job_ids, strict=True):
         click.echo(f"job {job_id}: ingest {path}")
+    # Said now, not when the generate job fails after the annotators' work.
+    blocker = sample_blocker(state.settings, None if mono_dir is None else Video(meta={"mono": "precomputed"}))
+    if blocker and not any(is_scene(p) for p in sources):
+        click.echo(f"note: {blocker}", err=True)
     if wait:
         wait_for_jobs(state, job_ids)
+
+
+def is_scene(path: Path) -> bool:
+    """Whether ``path`` is a synthetic scene (it brings its own depth)."""
+    return (path / SCENE_FILE).is_file()
 
 
 def brief_result(result: dict[str, Any]) -> str:

@@ -85,6 +85,24 @@ def retry(state: CliState, job_id: int) -> None:
     click.echo(f"job {job_id} queued again" + (f" (run {run_id} resumes)" if run_id is not None else ""))
 
 
+@jobs.command("retry-generates")
+@pass_state
+def retry_generates(state: CliState) -> None:
+    """Queue again the failed generate jobs whose frames can become samples now (their cause fixed: a depth
+    model configured, the video's depth imported); say why the others still cannot."""
+    from dataset.services.sample_blockers import retry_failed_generates
+    from dataset.wording import plural
+
+    rt = state.runtime
+    with service_errors(), transaction(rt.sessions) as s:
+        result = retry_failed_generates(s, rt.settings, rt.queue.retry)
+    click.echo(f"queued {plural(len(result['retried']), 'generate job')} again"
+               + (f": {', '.join(map(str, result['retried']))}" if result["retried"] else ""))
+    for blocked in result["still_blocked"]:
+        click.echo(f"{plural(len(blocked['frame_ids']), 'frame')} still cannot ({', '.join(map(str, blocked['frame_ids'][:10]))}"
+                   f"{' …' if len(blocked['frame_ids']) > 10 else ''}): {blocked['reason']}", err=True)
+
+
 @jobs.command("show")
 @click.argument("job_id", type=int)
 @pass_state

@@ -7,8 +7,10 @@ from flask.typing import ResponseReturnValue
 
 from dataset.models import FrameState, Role, Video
 from dataset.services.frames import FUNNEL_MEANINGS, FUNNEL_STAGES, funnel_counts
+from dataset.services.sample_blockers import blocked_videos, failed_generate_count, sample_blocker
 from dataset.services.validate import DB_INT_MAX
 from webapp.auth import requires
+from webapp.runtime import runtime
 
 bp = Blueprint("dashboard", __name__)
 
@@ -16,7 +18,10 @@ bp = Blueprint("dashboard", __name__)
 @bp.get("/")
 @requires(Role.annotator)
 def dashboard() -> ResponseReturnValue:
-    return render_template("dashboard.html", counts=funnel_counts(g.db), stages=FUNNEL_STAGES, meanings=FUNNEL_MEANINGS)
+    settings = runtime().settings
+    return render_template("dashboard.html", counts=funnel_counts(g.db), stages=FUNNEL_STAGES, meanings=FUNNEL_MEANINGS,
+                           generate_failed=failed_generate_count(g.db), blocked_videos=blocked_videos(g.db, settings),
+                           sample_blocker=sample_blocker(settings, None))
 
 
 @bp.get("/frames")

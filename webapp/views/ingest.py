@@ -7,6 +7,7 @@ from flask.typing import ResponseReturnValue
 
 from dataset.ingest.sources import VIDEO_EXTENSIONS
 from dataset.models import IllusionType, Role, SourceKind
+from dataset.services.sample_blockers import sample_blocker
 from webapp.auth import requires
 from webapp.runtime import runtime
 
@@ -19,4 +20,6 @@ def ingest() -> ResponseReturnValue:
     """Upload videos; each becomes an ingest job."""
     return render_template("ingest.html", sources=list(SourceKind), illusion_types=list(IllusionType),
                            max_upload_mb=runtime().settings.max_upload_mb,
-                           extensions=sorted(VIDEO_EXTENSIONS))
+                           extensions=sorted(VIDEO_EXTENSIONS),
+                           # said before the upload: an uploaded video brings no depth of its own
+                           sample_blocker=sample_blocker(runtime().settings, None))

@@ -2,7 +2,7 @@
 // read-only when it can't be), its draft restored and its proposals offered; the queue watched while
 // it is empty.
 // Navigation runs one step at a time.
-import { api } from "../api.js";
+import { api, el } from "../api.js";
 import { framePlace, plural } from "../labels.js";
 import { call } from "../request.js";
 import { rejectionText } from "../sample_review.js";
@@ -112,6 +112,8 @@ async function open(id, how) {
   view.setImage(image);
   banner(null);
   showReturned(detail.returned);
+  showSampleNote(detail);
+  showFailedElsewhere(detail.failed_elsewhere);
   showWaiting(detail.returned_waiting);
   if (reason) readOnly(reason);
   else {
@@ -124,6 +126,39 @@ async function open(id, how) {
   watchWorkers(detail);
   preloadNext(detail);
   root.dataset.state = "ready";
+}
+
+// Why this frame will not (or did not) become a sample, above the stage: said before the work, not after
+// the submit. A failed generate job links to its page, where a curator retries it once the cause is fixed.
+function showSampleNote(detail) {
+  const failed = detail.generate_failed;
+  const reason = detail.sample_blocker ?? failed?.error;
+  $("sample-note").hidden = !reason;
+  if (!reason) return;
+  $("sample-note-title").textContent = detail.sample_blocker
+    ? "This frame cannot become a sample in this workspace; a submit is refused (your planes stay a draft):"
+    : `Its sample could not be made (generate job ${failed.job_id} failed):`;
+  $("sample-note-reason").textContent = reason;
+  const more = $("sample-note-more");
+  more.replaceChildren();
+  if (failed) {
+    more.append(el("a", { href: `/jobs/${failed.job_id}` }, `Job ${failed.job_id}`),
+                ": a curator retries it there once the cause is fixed.");
+  }
+}
+
+// Frames this annotator submitted whose sample could not be made: named on the next page, so a failure
+// after the submit does not go unseen. The link opens the job, whose page says why and offers the retry.
+function showFailedElsewhere(failed) {
+  const first = failed?.[0];
+  $("failed-elsewhere").hidden = !first;
+  if (!first) return;
+  const others = failed.length > 1 ? ` (${plural(failed.length - 1, "other frame")} too)` : "";
+  $("failed-elsewhere-text").textContent = `Frame #${first.frame_id}, which you submitted, got no sample${others}: `
+    + `${first.error ?? "its generate job failed"}.`;
+  const link = $("failed-elsewhere-link");
+  link.href = `/jobs/${first.job_id}`;
+  link.textContent = `Job ${first.job_id}`;
 }
 
 // A frame a curator sent back: who, when and why, above the stage.

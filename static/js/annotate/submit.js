@@ -5,7 +5,7 @@ import { call } from "../request.js";
 import { sayFailure } from "../session_ended.js";
 import { editable, pickType, selectPair } from "./editing.js";
 import { checkQueue, fromQueue, navigate } from "./lifecycle.js";
-import { planeName, say } from "./messages.js";
+import { planeName, say, saveState } from "./messages.js";
 import { $, API, page, ui } from "./page.js";
 import { masksArrived } from "./segment.js";
 import * as S from "./state.js";
@@ -40,6 +40,14 @@ export async function submit() {
   say("Submitting…");
   const res = await page.session.submit(page.history.doc);
   if (!res.ok) {
+    // Refused because the frame cannot become a sample: the regions were saved as a draft, so the
+    // page goes on from the version that draft got.
+    if (res.status === 409 && res.data.sample_blocker) {
+      page.session.version = res.data.annotation_version;
+      page.session.saved = page.history.doc;
+      saveState("Draft saved", "");
+      return say(res.error.message, "error");
+    }
     if (res.status === 409) page.session.hooks.conflict(res.error.message);
     return sayFailure(say)(res.error);
   }
