@@ -19,6 +19,7 @@ link ``best_step_XXXXXXX.pt`` that stays put.
 from __future__ import annotations
 
 import fcntl
+import functools
 import json
 import os
 import re
@@ -250,13 +251,18 @@ def import_checkpoint(settings: Any, file: Path, *, source: str, name: str | Non
     if destination.is_symlink():
         raise Conflict(f"{IMPORTED}:{name} is a symbolic link, not the workspace's own checkpoint; remove it first")
     if source == "depth-anything-v2":
-        from annotation.depth.depth_anything_import import import_file
+        from annotation.depth.depth_anything_import import import_file as import_depth
+        from model.checkpoint import read_weights_only
+
+        import_file = functools.partial(import_depth, read=read_weights_only)
     else:
         from model.raft_import import import_file
     try:
         result = import_file(Path(file), destination)
     except ValueError as exc:  # not a checkpoint of that source, unreadable, or a pickle naming code
         raise InvalidInput(str(exc).splitlines()[0]) from None
+    if source == "depth-anything-v2":  # a monocular model: no stereo preset to fit
+        return {"checkpoint": f"{IMPORTED}:{name}", **result}
     from model.start_fit import fitting_presets, write_sidecar
 
     write_sidecar(destination, result["config"])

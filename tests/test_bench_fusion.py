@@ -14,12 +14,12 @@ from sqlalchemy import select
 
 torch = pytest.importorskip("torch")
 
+from benchmarks import fusion  # noqa: E402  (not its test_samples by name: pytest would collect it)
+from benchmarks.trunk import save_trunk  # noqa: E402
 from model.checkpoint import save_checkpoint  # noqa: E402
 from model.losses import fusion_loss  # noqa: E402
 from model.network import FusionNetwork  # noqa: E402
 from model.presets import load_preset  # noqa: E402
-from webapp.benchmarks import fusion  # noqa: E402  (not its test_samples by name: pytest would collect it)
-from webapp.benchmarks.trunk import save_trunk  # noqa: E402
 from webapp.cli import main  # noqa: E402
 
 NETWORKS = {n.name: n for n in (fusion.FUSION, *fusion.ABLATIONS)}

@@ -14,6 +14,8 @@ from click.testing import CliRunner
 
 torch = pytest.importorskip("torch")
 
+from benchmarks import fusion, pretrain  # noqa: E402
+from benchmarks.trunk import TRUNK_PREFIXES, compose_init, load_trunk, save_trunk  # noqa: E402
 from dataset.services import training  # noqa: E402
 from dataset.synthetic import render_video  # noqa: E402
 from dataset.synthetic.corruptions import warped_mono  # noqa: E402
@@ -22,8 +24,6 @@ from model.checkpoint import load_network, save_checkpoint  # noqa: E402
 from model.jobs import resolve_config  # noqa: E402
 from model.network import FusionNetwork  # noqa: E402
 from model.presets import Config, load_preset  # noqa: E402
-from webapp.benchmarks import fusion, pretrain  # noqa: E402
-from webapp.benchmarks.trunk import TRUNK_PREFIXES, compose_init, load_trunk, save_trunk  # noqa: E402
 from webapp.cli import main  # noqa: E402
 
 NETWORKS = (fusion.FUSION, *fusion.ABLATIONS)

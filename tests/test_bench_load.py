@@ -9,11 +9,11 @@ import json
 import pytest
 from click.testing import CliRunner
 
+from benchmarks.load_check import lost_writes
+from benchmarks.load_clients import Decision, Save, Tally
 from dataset.db import transaction
 from dataset.models import Annotation, Frame, FrameState, Region, RegionKind, SourceKind, Video
 from tests.conftest import TEST_DATABASE_URL, TEST_REDIS_URL
-from webapp.benchmarks.load_check import lost_writes
-from webapp.benchmarks.load_clients import Decision, Save, Tally
 from webapp.cli import main
 
 ROUTES = {"POST /api/v1/queue/annotate/next", "GET /api/v1/frames/{id}", "POST /api/v1/frames/{id}/segment",

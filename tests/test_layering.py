@@ -2,7 +2,8 @@
 
 ``model`` may import ``dataset`` and ``annotation``; ``annotation`` imports only
 ``dataset.formats``, ``dataset.filecache``, ``dataset.atomic`` and ``dataset.geometry``; nothing imports ``webapp`` but
-``webapp``; ``dataset`` never imports ``model`` or ``webapp``; ``dataset.geometry`` imports no
+``webapp`` and ``benchmarks`` (a harness that drives the served app), and nothing imports ``benchmarks`` but the CLI's
+``bench`` command; ``dataset`` never imports ``model`` or ``webapp``; ``dataset.geometry`` imports no
 Flask, database or torch. Every import counts, also those inside functions.
 """
 
@@ -17,14 +18,14 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("annotation", "dataset", "model", "webapp")
+PACKAGES = ("annotation", "dataset", "model", "webapp", "benchmarks")
 # dataset.geometry is pure numpy/OpenCV (its own test below): the plane-break proposer fits planes with it.
 ANNOTATION_MAY_USE = ("dataset.formats", "dataset.filecache", "dataset.atomic", "dataset.geometry")
 GEOMETRY_MUST_NOT_USE = ("flask", "flask_login", "sqlalchemy", "alembic", "torch", "transformers")
 
 
 def _imports() -> list[tuple[str, str]]:
-    """(importing module, imported module) for every import statement of the four packages."""
+    """(importing module, imported module) for every import statement of the project's packages."""
     found = []
     for package in PACKAGES:
         for path in sorted((ROOT / package).rglob("*.py")):
@@ -56,8 +57,12 @@ def test_the_walk_sees_the_imports() -> None:
     assert len(pairs) > 300
 
 
-def test_nothing_imports_webapp_but_webapp() -> None:
-    assert _violations(lambda a, b: not _within(a, ("webapp",)) and _within(b, ("webapp",))) == []
+def test_nothing_imports_webapp_but_webapp_and_the_benchmarks() -> None:
+    assert _violations(lambda a, b: not _within(a, ("webapp", "benchmarks")) and _within(b, ("webapp",))) == []
+
+
+def test_only_the_bench_command_imports_the_benchmarks() -> None:
+    assert _violations(lambda a, b: not _within(a, ("benchmarks", "webapp.cli.bench")) and _within(b, ("benchmarks",))) == []
 
 
 def test_dataset_never_imports_model_or_webapp() -> None:

@@ -9,6 +9,7 @@ import pytest
 from alembic import command
 from sqlalchemy import select, text
 
+from benchmarks.scale import seed
 from dataset.db import alembic_config, make_engine, transaction
 from dataset.export.coco import coco_document
 from dataset.export.native import export_native
@@ -21,7 +22,6 @@ from dataset.services.annotate import save_annotation
 from dataset.services.demo import true_regions
 from dataset.services.errors import InvalidInput
 from tests.test_generate import _user, generate_all, prepare
-from webapp.benchmarks.scale import seed
 from webapp.runtime import Runtime
 
 

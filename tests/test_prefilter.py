@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from sqlalchemy import func, select
 
+from benchmarks.vlm_server import ChatRequest, LocalVLMServer, Reply
 from dataset.db import transaction
 from dataset.models import Frame, Job, PrefilterResult
 from dataset.services import jobs as job_service
@@ -20,7 +21,6 @@ from dataset.services.prefilter import launch_prefilter
 from dataset.synthetic import write_synthetic_dataset
 from tests.conftest import make_settings
 from tests.workers import wait_for
-from webapp.benchmarks.vlm_server import ChatRequest, LocalVLMServer, Reply
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime
 

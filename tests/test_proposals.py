@@ -10,10 +10,10 @@ from annotation.proposals.base import mask_iou, quad_mask, ring_support, suppres
 from annotation.proposals.vlm import CORNER_PROMPT, VlmProposer, parse_corners
 from annotation.segment import make_segmenter
 from annotation.vlm import make_backend
+from benchmarks.proposals import MAX_CLICKS, Match, best_match, clicks_to_target, precision, summarise
+from benchmarks.vlm_server import LocalVLMServer, fixed_responder
 from dataset.synthetic import render_video
 from dataset.synthetic.mono import realistic_mono
-from webapp.benchmarks.proposals import MAX_CLICKS, Match, best_match, clicks_to_target, precision, summarise
-from webapp.benchmarks.vlm_server import LocalVLMServer, fixed_responder
 
 
 @pytest.fixture(scope="module")

@@ -13,6 +13,7 @@ from click.testing import CliRunner
 from annotation.proposals import make_proposers
 from annotation.proposals.base import mask_iou
 from annotation.proposals.plane_break import DEFAULT_THRESHOLD, SCORE_FLOOR, Evidence, PlaneBreakProposer, score
+from benchmarks.proposals import _Looks, composite_frames, real_scenes, sweep
 from dataset.formats import write_pfm, write_rgb
 from dataset.synthetic.composite import (
     DEPICTED_RATIO,
@@ -26,7 +27,6 @@ from dataset.synthetic.composite import (
     untouched_scenes,
 )
 from dataset.synthetic.mono import realistic_mono, sample_mono_model
-from webapp.benchmarks.proposals import _Looks, composite_frames, real_scenes, sweep
 from webapp.cli import main
 
 

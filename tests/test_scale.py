@@ -10,6 +10,7 @@ import pytest
 from alembic import command
 from sqlalchemy import func, select, text, update
 
+from benchmarks.scale import seed
 from dataset.db import alembic_config, make_engine, make_session_factory, transaction
 from dataset.models import (
     Frame,
@@ -28,7 +29,6 @@ from dataset.services import sample_review
 from dataset.services import users as user_service
 from dataset.services.errors import InvalidInput
 from dataset.services.frames import frames_page, funnel_counts
-from webapp.benchmarks.scale import seed
 
 _STATES = [FrameState.prefiltered, FrameState.approved, FrameState.rejected, FrameState.prefiltered,
            FrameState.ingested, FrameState.prefiltered, FrameState.deleted]

@@ -14,6 +14,7 @@ import pytest
 from alembic import command
 from sqlalchemy import func, select, text, update
 
+from benchmarks.scale import seed
 from dataset.db import alembic_config, make_engine, transaction
 from dataset.export import parse_split_spec, split_of
 from dataset.ingest.copies import find_copies
@@ -24,7 +25,6 @@ from dataset.services.scene_groups import join_scene_group
 from dataset.synthetic import write_synthetic_dataset
 from tests.fixtures.workspaces import export, open_runtime
 from tests.test_ingest import run_ingest, write_avi
-from webapp.benchmarks.scale import seed
 from webapp.runtime import Runtime
 
 

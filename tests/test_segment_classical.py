@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from annotation.segment import Embedding, SegmentError, make_segmenter
+from benchmarks.segment import person_click
 from dataset.synthetic import render_video
-from webapp.benchmarks.segment import person_click
 
 SEEDS = range(5)
 CLICK_SIZE = (1280, 720)

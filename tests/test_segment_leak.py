@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from annotation.segment import Embedding, make_segmenter
+from benchmarks.segment import person_click
 from dataset.synthetic import render_video
 from dataset.synthetic.layout import sample_layout
 from dataset.synthetic.raycast import N_FACES, View, trace
 from dataset.synthetic.render import intrinsics
-from webapp.benchmarks.segment import person_click
 
 SIZE = (1280, 720)
 BACK_WALL = 5  # room face z max, facing the camera

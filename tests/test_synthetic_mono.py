@@ -10,9 +10,9 @@ import cv2
 import numpy as np
 import pytest
 
+from benchmarks import fusion  # not its test_samples by name: pytest would collect it
 from dataset.synthetic import SyntheticFrame, SyntheticVideo, read_video, render_video, write_video
 from dataset.synthetic.mono import MIRROR_FRACTION, sample_mono_model
-from webapp.benchmarks import fusion  # not its test_samples by name: pytest would collect it
 
 WIDTH, HEIGHT = 320, 180
 # The training disparity range's 99th percentile that `illusion-studio bench fusion --mono-only`

@@ -16,6 +16,7 @@ skimage_data = pytest.importorskip("skimage.data")
 
 import torch.nn.functional as F  # noqa: E402
 
+from benchmarks.model import EYE, eye_parameters, eye_seconds, peak_mb  # noqa: E402
 from model.checkpoint import load_checkpoint, load_network, save_checkpoint  # noqa: E402
 from model.efficientnet_lite import (  # noqa: E402
     PACKAGE,
@@ -27,7 +28,6 @@ from model.mono import tensor_hash  # noqa: E402
 from model.network import FusionNetwork  # noqa: E402
 from model.presets import load_preset  # noqa: E402
 from model.vlm import EYE_STRIDE, VLM_PROMPT, EyeVlm  # noqa: E402
-from webapp.benchmarks.model import EYE, eye_parameters, eye_seconds, peak_mb  # noqa: E402
 
 SMALL = {"hidden_dims": [16, 16, 16], "motion_dim": 16, "feature_dim": 32, "vlm_dim": 32, "flow_dim": 32,
          "confidence_dim": 16, "fusion_dim": 16, "vlm_eye": "efficientnet-lite0"}
@@ -172,7 +172,7 @@ def test_the_bench_reports_the_eyes_parameters_and_time() -> None:
 def test_the_bench_childs_peak_memory_is_its_own() -> None:
     """The eye's memory figure is lite's with it against lite's without, each child's own peak."""
     ballast = np.ones(300 * 2**20 // 8)  # 300 MB resident here, in the parent
-    code = "from webapp.benchmarks.model import peak_mb; print(peak_mb())"
+    code = "from benchmarks.model import peak_mb; print(peak_mb())"
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert float(done.stdout) < 200 < peak_mb()
     del ballast

@@ -11,9 +11,9 @@ import pytest
 
 from annotation.vlm import PROMPT, make_backend
 from annotation.vlm.backends.openai_compat import OpenAICompatBackend
+from benchmarks.prefilter import run_prefilter_bench
+from benchmarks.vlm_server import ChatRequest, LocalVLMServer, Reply, ScriptedResponder, fixed_responder
 from dataset.synthetic import render_video
-from webapp.benchmarks.prefilter import run_prefilter_bench
-from webapp.benchmarks.vlm_server import ChatRequest, LocalVLMServer, Reply, ScriptedResponder, fixed_responder
 
 KEEP = "no,yes,no,no,no,no,no,no,no,no,no,no"
 

@@ -15,10 +15,10 @@ from typing import Any
 
 import pytest
 
+from benchmarks import served
 from dataset.models import Job
 from dataset.settings import Settings, write_settings_file
 from tests.conftest import TEST_REDIS_URL, make_settings, migrate_copying
-from webapp.benchmarks import served
 from webapp.runtime import Runtime
 
 

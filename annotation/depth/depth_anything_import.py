@@ -25,7 +25,7 @@ import os
 import re
 import shutil
 import tempfile
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -207,20 +207,20 @@ def _few(keys: list[str]) -> str:
     return shown + (f" and {len(keys) - 3} more" if len(keys) > 3 else "")
 
 
-def read_original(path: Path) -> dict[str, Any]:
-    """An original file's state dict, loaded weights-only (a pickle naming code is refused)."""
-    from model.checkpoint import read_weights_only
-
-    state = read_weights_only(Path(path), Path(path).name)
+def read_original(path: Path, read: Callable[[Path, str], Any]) -> dict[str, Any]:
+    """An original file's state dict, loaded by ``read(path, label)`` — the model package's weights-only
+    loader, passed in since ``annotation`` imports nothing of ``model`` (a pickle naming code is refused)."""
+    state = read(Path(path), Path(path).name)
     if not isinstance(state, Mapping):
         raise NotDepthAnything(f"{Path(path).name} holds a {type(state).__name__}, not a state dict")
     return dict(state)
 
 
-def import_file(path: Path, destination: Path) -> dict[str, Any]:
-    """Convert the original file ``path`` and write it to the directory ``destination`` (built aside and
-    renamed into place; an existing one is replaced): ``config.json``, ``model.safetensors`` and
-    :data:`IMPORT_FILE`. Returns ``{"architecture", "keys_loaded", "tensors_in_file"}``."""
+def import_file(path: Path, destination: Path, read: Callable[[Path, str], Any]) -> dict[str, Any]:
+    """Convert the original file ``path`` (loaded by ``read``, see :func:`read_original`) and write it to
+    the directory ``destination`` (built aside and renamed into place; an existing one is replaced):
+    ``config.json``, ``model.safetensors`` and :data:`IMPORT_FILE`. Returns ``{"architecture",
+    "keys_loaded", "tensors_in_file"}``."""
     path = Path(path)
     if "metric" in path.name.lower():
         # The metric-depth files have exactly the relative ones' tensors; only their head's last
@@ -228,7 +228,7 @@ def import_file(path: Path, destination: Path) -> dict[str, Any]:
         raise NotDepthAnything(f"{path.name} looks like a metric-depth file (its name says metric): its tensors "
                                "match the relative models' but its output is not relative disparity; only the "
                                "relative depth_anything_v2_vit*.pth files import")
-    model, arch, tensors = convert(read_original(path))
+    model, arch, tensors = convert(read_original(path, read))
     digest = hashlib.sha256(path.read_bytes()).hexdigest()
     source = {"from": SOURCE, "file": path.name, "sha256": digest, "architecture": arch, "pipeline": "original",
               "imported_at": datetime.now(UTC).isoformat(timespec="seconds")}

@@ -41,7 +41,7 @@ def geometry_benchmark(as_json: bool, repeats: int) -> None:
 @click.option("--concurrency", type=click.IntRange(min=1, max=256), default=16, show_default=True)
 def prefilter_benchmark(as_json: bool, frames: int, concurrency: int) -> None:
     """Frames per second the openai backend's client sustains against an instant local server."""
-    from webapp.benchmarks.prefilter import run_prefilter_bench
+    from benchmarks.prefilter import run_prefilter_bench
 
     _report(run_prefilter_bench(frames=frames, concurrency=concurrency), as_json)
 
@@ -52,7 +52,7 @@ def prefilter_benchmark(as_json: bool, frames: int, concurrency: int) -> None:
 @click.option("--no-sam2", is_flag=True, help="Only the classical backend.")
 def click_benchmark(as_json: bool, clicks: int, no_sam2: bool) -> None:
     """Click → mask over HTTP at 1080p (p50/p95), classical and SAM2, beside in-process predict times."""
-    from webapp.benchmarks.click import run_click_bench
+    from benchmarks.click import run_click_bench
 
     _report(run_click_bench(clicks=clicks, sam2=not no_sam2), as_json)
 
@@ -67,7 +67,7 @@ def click_benchmark(as_json: bool, clicks: int, no_sam2: bool) -> None:
 def proposals_benchmark(as_json: bool, real: Path | None, fmt: str | None, threshold: float | None) -> None:
     """Illusion proposers on held-out synthetic videos and on real scenes with composited pictures: recall,
     precision, false proposals on untouched frames, a threshold sweep, IoU, ms, and clicks saved."""
-    from webapp.benchmarks.proposals import report_lines, run_proposals_bench
+    from benchmarks.proposals import report_lines, run_proposals_bench
 
     if real is not None and fmt is None:
         raise click.UsageError("--real needs --format (the layout of its pairs)")
@@ -83,7 +83,7 @@ def proposals_benchmark(as_json: bool, real: Path | None, fmt: str | None, thres
 @click.option("--repeats", type=click.IntRange(min=1), default=3, show_default=True)
 def generate_benchmark(as_json: bool, repeats: int) -> None:
     """One 1080p sample end to end through the generation job (CPU seconds), beside the authors' steps."""
-    from webapp.benchmarks.generate import run_generate_bench
+    from benchmarks.generate import run_generate_bench
 
     _report(run_generate_bench(repeats=repeats), as_json)
 
@@ -98,7 +98,7 @@ def generate_benchmark(as_json: bool, repeats: int) -> None:
 @click.option("--repeats", type=click.IntRange(min=2), default=20, show_default=True, help="Timed calls per route.")
 def scale_benchmark(as_json: bool, frames: int, database_url: str | None, repeats: int) -> None:
     """p50/p95 of every list and queue route with N frames seeded, beside the same at N/10."""
-    from webapp.benchmarks.scale import run_scale_bench
+    from benchmarks.scale import run_scale_bench
 
     results = run_scale_bench(frames=frames, database_url=database_url, repeats=repeats)
     if as_json:
@@ -129,7 +129,7 @@ def load_benchmark(as_json: bool, annotators: int, curators: int, seconds: float
                    database_url: str | None, queue_url: str | None) -> None:
     """Annotators and curators at once against a served app with a worker: requests, 5xx, 409s,
     lost writes (checked in the database afterwards) and p50/p95 per route."""
-    from webapp.benchmarks.load import run_load_bench
+    from benchmarks.load import run_load_bench
 
     if annotators + curators == 0:
         raise click.BadParameter("needs at least one annotator or curator", param_hint="--annotators/--curators")
@@ -150,7 +150,7 @@ def load_benchmark(as_json: bool, annotators: int, curators: int, seconds: float
 @click.option("--steps", type=click.IntRange(min=2), default=8, show_default=True, help="Timed steps per process count.")
 def train_benchmark(as_json: bool, steps: int) -> None:
     """Training samples/s of the lite preset at its crop with 1 and 2 processes (gloo DDP on CPU)."""
-    from webapp.benchmarks.train import run_train_bench
+    from benchmarks.train import run_train_bench
 
     _report(run_train_bench(steps=steps), as_json)
 
@@ -160,7 +160,7 @@ def train_benchmark(as_json: bool, steps: int) -> None:
 def memory_benchmark(as_json: bool) -> None:
     """The lite trainer's peak memory at several crops and iterations, the memory model's fit to them,
     and the estimate launches are checked with (model/fit.py's MEMORY_MB)."""
-    from webapp.benchmarks.memory import run_memory_bench
+    from benchmarks.memory import run_memory_bench
 
     _report(run_memory_bench(), as_json)
 
@@ -174,7 +174,7 @@ def memory_benchmark(as_json: bool) -> None:
 def model_benchmark(as_json: bool, repeats: int, train_steps: int, no_raft_stereo: bool) -> None:
     """The lite fusion model on a 1080p pair (own process: seconds, peak MB) beside OpenCV SGBM and RAFT-Stereo's
     network; parameters; train steps/s."""
-    from webapp.benchmarks.model import run_model_bench
+    from benchmarks.model import run_model_bench
 
     _report(run_model_bench(repeats=repeats, train_steps=train_steps, raft_stereo=not no_raft_stereo), as_json)
 
@@ -182,7 +182,7 @@ def model_benchmark(as_json: bool, repeats: int, train_steps: int, no_raft_stere
 def _lite_overrides(ctx: click.Context, param: click.Parameter, values: tuple[str, ...]) -> dict[str, str]:
     """``KEY=VALUE`` options as overrides of ``lite``, checked against its config as each network trains
     it (BadParameter naming the first that does not fit, or that the benchmark sets itself)."""
-    from webapp.benchmarks import fusion
+    from benchmarks import fusion
 
     overrides: dict[str, str] = {}
     for value in values:
@@ -236,8 +236,8 @@ def fusion_benchmark(as_json: bool, seeds: int, steps: int | None, work_dir: Pat
     sgbm (with --ablations also the no-VLM network's fusion and stereo branch, and stereo_only) on frozen
     held-out rendered pairs (all, picture, mirror, non-illusion), their monocular input the realistic
     estimator's or, with --mono warp, one of another family."""
-    from webapp.benchmarks.fusion import DEFAULT_STEPS, FINETUNE_STEPS, run_fusion_bench, run_mono_bench
-    from webapp.benchmarks.trunk import TRUNK_FILE
+    from benchmarks.fusion import DEFAULT_STEPS, FINETUNE_STEPS, run_fusion_bench, run_mono_bench
+    from benchmarks.trunk import TRUNK_FILE
 
     if mono == "warp" and split is not None:
         raise click.UsageError("--mono warp scores pairs of seeds of their own: --split is for the realistic mono's pairs")
@@ -273,7 +273,7 @@ def pretrain_benchmark(as_json: bool, work_dir: Path, videos: int | None, frames
     """Pre-train lite's trunk (mono context encoder and stereo branch) on many rendered scenes with exact
     disparity, never the benchmark's seeds, through the product's training job; `bench fusion` then
     fine-tunes every network from it."""
-    from webapp.benchmarks.pretrain import PRETRAIN_FRAMES, PRETRAIN_STEPS, PRETRAIN_VIDEOS, run_pretrain
+    from benchmarks.pretrain import PRETRAIN_FRAMES, PRETRAIN_STEPS, PRETRAIN_VIDEOS, run_pretrain
 
     results = run_pretrain(work_dir.absolute(), videos=videos or PRETRAIN_VIDEOS, frames=frames or PRETRAIN_FRAMES,
                            steps=steps or PRETRAIN_STEPS)

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from sqlalchemy import select
 
+from benchmarks.workspace import approved_frame_workspace
 from dataset.db import transaction
 from dataset.geometry.benchmark import reference_plane_fit, reference_right_view
 from dataset.models import Frame, Job, Sample, User
@@ -23,7 +24,6 @@ from dataset.services import jobs as job_service
 from dataset.services.annotate import save_annotation
 from dataset.services.demo import true_regions
 from dataset.synthetic import read_video, write_synthetic_dataset
-from webapp.benchmarks.workspace import approved_frame_workspace
 from webapp.jobs.handlers import HANDLERS
 
 

@@ -7,7 +7,7 @@ over the range that covers the held-out pairs' disparities (``fusion.capture_bas
 captures into a workspace of their own (``<work dir>/pretrain/workspace``) and accepted; one ``lite``
 run trains on them through the product's training job. The network trained is the no-VLM one, so that
 its mono context encoder learns from the mono input as the fusion networks' does; only its trunk
-(``webapp.benchmarks.trunk``) is kept, in ``<work dir>/pretrain/trunk.safetensors`` with
+(``benchmarks.trunk``) is kept, in ``<work dir>/pretrain/trunk.safetensors`` with
 ``trunk.json`` (recipe and sha256) beside it, where ``bench fusion`` finds it.
 """
 
@@ -17,11 +17,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+from benchmarks import fusion
+from benchmarks.trunk import TRUNK_FILE, save_trunk
 from dataset.models import TrainingRun
 from dataset.synthetic.io import FORMAT as SYNTHETIC_FORMAT
 from dataset.version import code_version
-from webapp.benchmarks import fusion
-from webapp.benchmarks.trunk import TRUNK_FILE, save_trunk
 
 PRETRAIN_FIRST_SEED = 10_000
 PRETRAIN_VIDEOS = 200

@@ -2,7 +2,7 @@
 the classical backend and of SAM2 at the default hiera-tiny architecture with random weights
 and a cached (bytes round-tripped) embedding, on a synthetic illusion scene.
 
-Run: ``python -m webapp.benchmarks.segment [--clicks N] [--size WxH] [--no-sam2]``.
+Run: ``python -m benchmarks.segment [--clicks N] [--size WxH] [--no-sam2]``.
 """
 
 from __future__ import annotations

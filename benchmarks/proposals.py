@@ -40,6 +40,7 @@ from annotation.proposals.base import mask_iou
 from annotation.proposals.plane_break import DEFAULT_THRESHOLD, SCORE_FLOOR
 from annotation.segment.base import Embedding, Segmenter
 from annotation.segment.registry import make_segmenter
+from benchmarks.segment import person_click
 from dataset.readers import SampleError, open_reader
 from dataset.synthetic import render_video
 from dataset.synthetic.composite import (
@@ -52,7 +53,6 @@ from dataset.synthetic.composite import (
 )
 from dataset.synthetic.mono import realistic_mono
 from dataset.synthetic.records import RegionPair
-from webapp.benchmarks.segment import person_click
 
 SEEDS = tuple(range(300, 306))
 FRAMES_PER_VIDEO = 3

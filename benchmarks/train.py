@@ -10,9 +10,9 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from benchmarks.workspace import synthetic_version, write_train_run
 from model.presets import load_preset
 from model.train.events import read_events
-from webapp.benchmarks.workspace import synthetic_version, write_train_run
 
 
 def run_train_bench(steps: int = 8, processes: tuple[int, ...] = (1, 2)) -> dict[str, Any]:

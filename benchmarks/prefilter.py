@@ -13,7 +13,7 @@ import numpy as np
 from annotation.vlm.backends.openai_compat import OpenAICompatBackend
 from annotation.vlm.parse import format_answers
 from annotation.vlm.prompt import N_QUESTIONS
-from webapp.benchmarks.vlm_server import LocalVLMServer, fixed_responder
+from benchmarks.vlm_server import LocalVLMServer, fixed_responder
 
 _DISTINCT_FRAMES = 4  # rendered once and cycled: the client still JPEG-encodes every request
 _SEQUENTIAL_FRAMES = 100  # enough for a stable concurrency-1 reference

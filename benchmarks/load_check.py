@@ -16,8 +16,8 @@ from collections.abc import Sequence
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from benchmarks.load_clients import Save, Tally
 from dataset.models import Annotation, AuditEntry, Frame, Review
-from webapp.benchmarks.load_clients import Save, Tally
 
 
 def lost_writes(session: Session, tallies: Sequence[Tally]) -> dict[str, int]:

@@ -124,7 +124,7 @@ def eye_parameters() -> dict[str, int]:
 def _timed(pair_file: Path, repeats: int, preset: str, overrides: dict[str, Any] | None = None) -> dict[str, Any]:
     """``preset`` (with ``overrides``) on the pair in a process of its own: {"seconds", "peak_mb",
     "threads", "iters"}, and with the eye on {"eye_s", "eye_input"}."""
-    code = (f"from webapp.benchmarks.model import _child; "
+    code = (f"from benchmarks.model import _child; "
             f"_child({str(pair_file)!r}, {repeats}, {preset!r}, {overrides!r})")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
     if done.returncode != 0:

@@ -20,15 +20,15 @@ import httpx
 import numpy as np
 
 from annotation.segment import Embedding
+from benchmarks.segment import default_sam2_dir, person_click
+from benchmarks.served import served_app
+from benchmarks.workspace import approved_frame_workspace
 from dataset.db import transaction
 from dataset.formats import mask_to_rle, rle_to_mask
 from dataset.models import Frame, User
 from dataset.services import segmentation
 from dataset.services import users as user_service
 from dataset.synthetic import write_synthetic_dataset
-from webapp.benchmarks.segment import default_sam2_dir, person_click
-from webapp.benchmarks.served import served_app
-from webapp.benchmarks.workspace import approved_frame_workspace
 from webapp.runtime import Runtime
 
 

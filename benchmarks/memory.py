@@ -12,9 +12,9 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.workspace import synthetic_version, write_train_run
 from model.fit import coefficients
 from model.presets import load_preset
-from webapp.benchmarks.workspace import synthetic_version, write_train_run
 
 # (H, W, iterations): spans the lite preset's crop (192x320, 7) to four times its work per sample.
 POINTS = ((192, 320, 4), (192, 320, 7), (320, 512, 7), (384, 640, 7), (384, 640, 14))

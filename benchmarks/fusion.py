@@ -5,7 +5,7 @@ their true masks, generated and accepted — as ``demo`` does — and (b) render
 other seeds imported as captures, whose raytraced right views show stereo fooled by mirrors (the
 generated samples never do: their right views are warped from the rectified disparity). Short
 ``lite`` runs train on them through the real training job, from scratch or fine-tuned from the
-pre-trained trunk of ``bench pretrain`` (``webapp.benchmarks.pretrain``).
+pre-trained trunk of ``bench pretrain`` (``benchmarks.pretrain``).
 
 The training data shows the test's conditions, not its seeds (protocol 2): each capture
 video is rendered at a baseline drawn for it from TRAIN_BASELINE_M, a range covering the held-out
@@ -53,6 +53,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 import model
+from benchmarks.trunk import Trunk, compose_init, load_trunk
 from dataset.atomic import atomic_write_bytes
 from dataset.capture.synthetic import import_rendered_video
 from dataset.db import transaction
@@ -76,7 +77,6 @@ from dataset.synthetic.mono import realistic_mono, sample_mono_model
 from model.evaluate import EvalOptions, evaluate, sample_metrics
 from model.methods import Predict, build_methods
 from model.presets import load_preset
-from webapp.benchmarks.trunk import Trunk, compose_init, load_trunk
 from webapp.cli.workspace import init_workspace
 from webapp.jobs import runs as run_control
 from webapp.jobs.handlers import HANDLERS

@@ -1,6 +1,6 @@
 """``bench load``: annotators and curators at once against a served app with a worker, for a bounded
 time; what the server answered (requests, 5xx, 409s, p50/p95 per route) and whether every write it
-acknowledged is in the database afterwards (:mod:`webapp.benchmarks.load_check`).
+acknowledged is in the database afterwards (:mod:`benchmarks.load_check`).
 
 The workspace is one synthetic video ingested as the real job does, half its frames approved (the
 annotators' queue) and half prefiltered (the curators' grid). Curators approve frames into the
@@ -26,14 +26,14 @@ from typing import Any
 import numpy as np
 from sqlalchemy import func, select, update
 
+from benchmarks.load_check import lost_writes
+from benchmarks.load_clients import Client, Tally, annotate, curate
+from benchmarks.served import served_app, start_worker, stop
+from benchmarks.workspace import ingested_workspace
 from dataset.db import scratch_database, transaction
 from dataset.models import Frame, FrameState, Job
 from dataset.services import users as user_service
 from dataset.synthetic import write_synthetic_dataset
-from webapp.benchmarks.load_check import lost_writes
-from webapp.benchmarks.load_clients import Client, Tally, annotate, curate
-from webapp.benchmarks.served import served_app, start_worker, stop
-from webapp.benchmarks.workspace import ingested_workspace
 from webapp.runtime import Runtime
 
 BENCH_DATABASE = "bench_load"
