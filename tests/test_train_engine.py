@@ -74,6 +74,7 @@ def test_a_run_writes_events_checkpoints_validation_and_tensorboard(native: Path
 
 
 @pytest.mark.slow
+@pytest.mark.serial  # two gloo ranks beside another test process's load once aborted at teardown
 def test_two_gloo_processes_equal_one_with_the_same_global_batch(native: Path, tmp_path: Path) -> None:
     one = make_run(tmp_path / "one", native, val=False, steps=3, checkpoint_every=3)
     two = make_run(tmp_path / "two", native, val=False, steps=3, checkpoint_every=3)
