@@ -171,11 +171,6 @@ class _Reader(StreamReader):
         super(StreamReader, self).__init__(self.raw_ahead, bufsize)
         self.bytes_read = 0
 
-    def has_data(self) -> bool:
-        """Bytes to read without the socket: buffered, or read ahead and not yet buffered (a pipelined
-        request that came with the last one). cheroot asks this before it waits on the socket again."""
-        return bool(super().has_data() or self.raw_ahead.ahead or self.raw_ahead.spool is not None)
-
 
 @dataclass
 class Arrival:
