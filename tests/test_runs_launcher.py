@@ -35,7 +35,8 @@ def test_stop_kills_the_whole_group_and_leaves_no_process() -> None:
     code = group.stop(grace_s=1.0)
     assert code != 0
     assert time.monotonic() - started < 10
-    assert group_members(group.pgid) == []
+    # The group is gone once its last member is reaped, which a loaded machine may take a moment to do.
+    until(lambda: group_members(group.pgid) == [], timeout=5, what="the stopped group to be reaped")
     for pid in members:
         assert not Path(f"/proc/{pid}").exists() or "Z" in (Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2][:3])
 
