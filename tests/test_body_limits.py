@@ -16,9 +16,9 @@ from pathlib import Path
 import psutil
 import pytest
 
-from dataset.db import migrate, transaction
-from dataset.services import users as user_service
+from dataset.db import migrate
 from tests.conftest import make_settings
+from tests.served import head, served_app
 from webapp.bodies import DEFAULT_BODY_BYTES, DRAFT_BODY_BYTES, PUBLIC_BODY_BYTES
 from webapp.cli.workspace import make_server
 from webapp.runtime import Runtime
@@ -31,26 +31,8 @@ THREADS = 2
 @pytest.fixture(scope="module")
 def served(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[int, dict[str, str]]]:
     """The app under `serve`'s server with two worker threads; (its port, a token per role)."""
-    settings = make_settings(tmp_path_factory.mktemp("bodies") / "ws")
-    migrate(settings.database_url)
-    rt = Runtime(settings)
-    with transaction(rt.sessions) as s:
-        tokens = {role: user_service.issue_token(s, user_service.create_user(s, role, role, "long-enough"))
-                  for role in ("annotator", "curator")}
-    server = make_server(settings, rt, "127.0.0.1", 0, threads=THREADS)
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    try:
-        yield server.effective_port, tokens
-    finally:
-        server.close()
-        thread.join(10)
-        rt.close()
-
-
-def head(method: str, path: str, headers: dict[str, str]) -> bytes:
-    lines = [f"{method} {path} HTTP/1.1", "Host: 127.0.0.1", *(f"{k}: {v}" for k, v in headers.items())]
-    return ("\r\n".join(lines) + "\r\n\r\n").encode()
+    with served_app(tmp_path_factory.mktemp("bodies") / "ws", THREADS) as answer:
+        yield answer
 
 
 def zeros(total: int) -> Iterator[bytes]:

@@ -19,12 +19,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from dataset.db import migrate, transaction
-from dataset.services import users as user_service
-from tests.conftest import make_settings
+from tests.served import chunk, head, served_app
 from webapp import server as server_module
-from webapp.cli.workspace import make_server
-from webapp.runtime import Runtime
 from webapp.server import BODY_GRACE_S, BODY_MIN_RATE, SPOOL_BYTES, ChunkCounter
 
 pytestmark = pytest.mark.serial  # measures latency: alone, after the parallel part
@@ -35,30 +31,9 @@ EXPIRY_SLACK_S = 1.5  # the selector looks for expired connections every 0.5 s
 
 @pytest.fixture(scope="module")
 def served(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[int, dict[str, str]]]:
-    settings_ = make_settings(tmp_path_factory.mktemp("slow") / "ws")
-    migrate(settings_.database_url)
-    rt = Runtime(settings_)
-    with transaction(rt.sessions) as s:
-        tokens = {role: user_service.issue_token(s, user_service.create_user(s, role, role, "long-enough"))
-                  for role in ("annotator", "curator")}
-    server = make_server(settings_, rt, "127.0.0.1", 0, threads=THREADS)
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    try:
-        yield server.effective_port, tokens
-    finally:
-        server.close()
-        thread.join(10)
-        rt.close()
-
-
-def head(method: str, path: str, headers: dict[str, str]) -> bytes:
-    lines = [f"{method} {path} HTTP/1.1", "Host: 127.0.0.1", *(f"{k}: {v}" for k, v in headers.items())]
-    return ("\r\n".join(lines) + "\r\n\r\n").encode()
-
-
-def chunk(data: bytes) -> bytes:
-    return f"{len(data):x}\r\n".encode() + data + b"\r\n"
+    """The app under `serve`'s server with its default eight worker threads; (its port, a token per role)."""
+    with served_app(tmp_path_factory.mktemp("slow") / "ws", THREADS) as answer:
+        yield answer
 
 
 class Drip:
