@@ -29,7 +29,9 @@ def require_chromium() -> None:
         pytest.skip("browser tests need the system's Chromium: apt-get install chromium")
 
 
-@pytest.fixture(scope="session")
+# One Chromium per test module, not per session: with ``--dist loadfile`` a worker goes on to other modules,
+# and Playwright's sync API (an asyncio loop run under greenlets) should not stay alive under their threads.
+@pytest.fixture(scope="module")
 def browser():  # type: ignore[no-untyped-def]
     require_chromium()
     from playwright.sync_api import sync_playwright
