@@ -10,7 +10,9 @@ at 90 minutes after one worker crashed. Here a crash costs one failed test and t
 - the test the worker died on is reported failed (xdist does so) and not run again, so a test that
   kills its interpreter cannot kill every replacement in turn;
 - a replacement worker starts with two files, as the first workers do, because a worker holds its
-  last test until it knows the next one (PR #1328).
+  last test until it knows the next one (PR #1328);
+- work sent to a worker that died a moment before (the controller has not heard yet) is not an
+  INTERNALERROR ending the run: it stays the dead worker's, and goes back on the queue with the rest.
 
 Remove this module once a pytest-xdist release carries those fixes.
 """
@@ -38,6 +40,12 @@ class CrashSafeLoadFileScheduling(LoadFileScheduling):
         for other in self.assigned_work:
             self._reschedule(other)
         return crashitem
+
+    def _assign_work_unit(self, node: WorkerController) -> None:
+        try:
+            super()._assign_work_unit(node)
+        except OSError:  # "cannot send (already closed?)": remove_node requeues the unit
+            pass
 
     def schedule(self) -> None:
         replacing = self.collection is not None

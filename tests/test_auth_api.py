@@ -71,6 +71,7 @@ def test_api_errors_are_json(client, tokens) -> None:  # type: ignore[no-untyped
         (client.get("/api/v1/nothing-here", headers=auth), 404, ""),
         (client.post("/api/v1/jobs/999/retry", headers=auth), 404, "no job"),
         (client.get("/api/v1/jobs?state=bogus", headers=auth), 400, "state must be one of"),
+        (client.get("/api/v1/jobs?kind=bogus", headers=auth), 400, "kind must be one of"),
         (client.post("/api/v1/prefilter", json={"video_id": "abc"}, headers=auth), 400, "integer"),
         (client.post("/api/v1/prefilter", json={"backend": "gpt"}, headers=auth), 400, "backend must be"),
         (client.post("/api/v1/frames/1/review", json={"decision": "approve", "revision": "x"}, headers=auth), 400,
@@ -85,9 +86,14 @@ def test_annotators_see_only_their_own_jobs(client, runtime, tokens) -> None:  #
     with transaction(runtime.sessions) as s:
         mine = job_service.create_job(s, "ingest", {}, user_service.get_user(s, "annotator")).id
         theirs = job_service.create_job(s, "ingest", {}, user_service.get_user(s, "admin")).id
-    def ids(role: str) -> set[int]:
-        return {j["id"] for j in client.get("/api/v1/jobs", headers={"Authorization": f"Bearer {tokens[role]}"}).json["items"]}
-    assert ids("annotator") == {mine} and ids("curator") == {mine, theirs}
+        generate = job_service.create_job(s, "generate", {}, user_service.get_user(s, "curator")).id
+    def ids(role: str, query: str = "") -> set[int]:
+        response = client.get(f"/api/v1/jobs{query}", headers={"Authorization": f"Bearer {tokens[role]}"})
+        return {j["id"] for j in response.json["items"]}
+    assert ids("annotator") == {mine} and ids("curator") == {mine, theirs, generate}
+    # the Ingest page's list: a curator's own ingest jobs, though a curator sees every job
+    assert ids("curator", "?kind=ingest") == {mine, theirs} and ids("curator", "?kind=ingest&mine=1") == set()
+    assert ids("curator", "?mine=1") == {generate} and ids("admin", "?kind=ingest&mine=1") == {theirs}
     response = client.get(f"/api/v1/jobs/{theirs}", headers={"Authorization": f"Bearer {tokens['annotator']}"})
     assert response.status_code == 404
     job = client.get(f"/api/v1/jobs/{mine}", headers={"Authorization": f"Bearer {tokens['annotator']}"}).json

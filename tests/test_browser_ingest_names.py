@@ -1,6 +1,6 @@
 """Two uploads of files with one name on the Ingest page, in a real browser at 1366x768: each row
 says what tells it apart, its size and when its upload began under the name, and once ingested the
-video it became beside its frame count (issue 33, item 13)."""
+video it became beside its frame count; a reload keeps the list."""
 
 from __future__ import annotations
 
@@ -67,6 +67,13 @@ def test_two_files_of_one_name_are_told_apart(browser, tmp_path: Path) -> None: 
             made.append(video.inner_text())
             expect(row.locator(".file-facts")).to_have_text(re.compile(f"^{FACTS}$"))
         assert made[0] != made[1], made
+        # a reload keeps the list: the same rows, each with its video, the time of its upload under the name
+        page.reload()
+        expect(rows).to_have_count(2)
+        for row, video in zip((rows.nth(0), rows.nth(1)), made, strict=True):
+            expect(row.locator(".name")).to_have_text("video.mp4")
+            expect(row.locator(".status")).to_contain_text(re.compile(rf"succeeded — .* · {video}$"))
+            expect(row.locator(".file-facts")).to_have_text(re.compile(r"^uploaded \d{1,2}:\d\d:\d\d(\s?[AP]M)?$"))
         # the facts sit on one line under the name, and the page keeps the window's width
         name_box, facts_box = rows.nth(0).locator(".name").bounding_box(), rows.nth(0).locator(".file-facts").bounding_box()
         assert facts_box["y"] >= name_box["y"] + name_box["height"] and abs(facts_box["x"] - name_box["x"]) < 1

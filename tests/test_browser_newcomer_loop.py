@@ -145,6 +145,7 @@ def test_annotate_names_the_frame_sent_back_and_counts_decided_proposals(browser
     assert lease["mine"] and lease["expires"], lease  # the frame left keeps its lease
     page.go_back()  # Back returns to the held frame, still the annotator's
     page.wait_for_function("(id) => window.annotator?.frame?.id === id", arg=held)
+    assert page.url == f"{url}/annotate/{held}"
     expect(banner).to_be_visible()
     assert errors == [], errors
 

@@ -1,10 +1,12 @@
 """The proposal threshold on the Annotate page in a real browser: with the demo's threshold at its
 highest, the proposals scoring under it are not shown until "Show all" is on (the `?` help lists its
-key); one is taken into the annotation, and on submit a hidden proposal left untouched is `hidden`,
-not rejected, and the dashboard's Proposers table has a row for the threshold."""
+key), and the page names the threshold; one is taken into the annotation, and on submit a hidden
+proposal left untouched is `hidden`, not rejected, and the dashboard's Proposers table has a row for
+the threshold."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -38,19 +40,26 @@ def test_hidden_proposals_wait_for_show_all_and_stay_hidden(browser, tmp_path: P
                         what="the frame's proposals", timeout=60)
         hidden = [p["id"] for p in offered if p["hidden"]]
         assert hidden and all(p["hidden"] == (p["score"] < THRESHOLD) for p in offered), offered
+        assert {p["threshold"] for p in offered} == {THRESHOLD}
         over = [p["id"] for p in offered if not p["hidden"]]
         page.wait_for_function("() => !document.getElementById('proposals-section').hidden")
         toggle = page.locator("#show-all-proposals")
         expect(toggle).not_to_be_checked()
         assert shown_ids(page) == over
-        if not over:
-            expect(page.locator("#proposals-note")).to_contain_text("under the threshold")
+        if not over:  # the threshold in force is named
+            expect(page.locator("#proposals-note")).to_contain_text(f"under the threshold {THRESHOLD:.2f}")
+        # the box sits on its label's line, not alone above it
+        label, box = page.locator("label:has(#show-all-proposals)").bounding_box(), toggle.bounding_box()
+        assert label["height"] < 2.2 * box["height"] and label["width"] > 3 * box["width"], (label, box)
 
         # "Show all" brings the hidden ones, marked as such; off again, they go
         toggle.click()
         expect(toggle).to_be_checked()
         assert shown_ids(page) == over + hidden
         expect(page.locator(f"#proposals [data-proposal='{hidden[0]}']")).to_have_attribute("data-hidden", "true")
+        expect(page.locator(f"#proposals [data-proposal='{hidden[0]}'] .score")).to_have_attribute(
+            "title", re.compile(f"under the threshold {THRESHOLD:.2f}"))
+        expect(page.locator("#message")).to_contain_text(f"under the threshold {THRESHOLD:.2f} too")
         page.keyboard.press("?")
         expect(page.locator("#keys-help tr", has_text="show all proposals")).to_contain_text("V")
         page.keyboard.press("Escape")

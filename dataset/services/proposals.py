@@ -181,11 +181,12 @@ def frame_proposals(session: Session, settings: Settings, frame_id: int) -> dict
 def proposal_json(proposal: Proposal) -> dict[str, Any]:
     """A proposal for the page: ``illusion_type`` is its guess where that is an annotation type (a
     "transparent" guess leaves the choice to the annotator), ``guess`` the proposer's own word,
-    ``hidden`` whether it scored under its scan's threshold (shown only when the annotator asks)."""
+    ``hidden`` whether it scored under ``threshold``, its scan's (shown only when the annotator asks)."""
     typed = proposal.type_guess if proposal.type_guess in IllusionType.__members__ else None
     return {"id": proposal.id, "source": proposal.source, "score": proposal.score, "illusion_type": typed,
             "guess": proposal.type_guess, "illusion": proposal.illusion_rle, "support": proposal.support_rle,
-            "fate": proposal.fate.value, "iou": proposal.iou, "hidden": is_hidden(proposal)}
+            "fate": proposal.fate.value, "iou": proposal.iou, "hidden": is_hidden(proposal),
+            "threshold": proposal.scan.threshold}
 
 
 def is_hidden(proposal: Proposal) -> bool:

@@ -37,39 +37,60 @@ function sizeText(bytes) {
   return `${Number(value.toPrecision(3))} ${unit}`;
 }
 
-// "12.3 MiB · 14:05:31": the file's size and when its upload began, in the browser's time.
-function fileFacts(file, started) {
-  const time = started.toLocaleTimeString([], { hour: "2-digit", minute: "2-digit", second: "2-digit" });
-  return `${sizeText(file.size)} · ${time}`;
+// "14:05:31", in the browser's time.
+const clockTime = (date) => date.toLocaleTimeString([], { hour: "2-digit", minute: "2-digit", second: "2-digit" });
+
+// "12.3 MiB · 14:05:31": the file's size and when its upload began.
+const fileFacts = (file, started) => `${sizeText(file.size)} · ${clockTime(started)}`;
+
+// A job's progress and outcome in its row; whether it has ended.
+function showJob(current, row) {
+  const label = row.querySelector(".status");
+  row.querySelector("progress").value = current.progress;
+  const done = ["succeeded", "failed", "interrupted"].includes(current.state);
+  label.replaceChildren(el("a", { href: `${form.dataset.jobPage}${current.id}` }, `ingest job #${current.id}`),
+                        `: ${current.state}${done ? ` — ${summary(current)}` : ""}`);
+  const copy = current.result?.copy_of;
+  if (copy) {
+    label.append(el("span", { className: "copy-note" },
+      `Looks like a copy of video ${copy.video_id} (“${copy.video_name}”; ${copy.matched} of ${copy.frames} frames `
+      + "alike): kept in the same scene group, so no split puts them on different sides."));
+  }
+  if (done) {
+    row.classList.toggle("failed", current.state !== "succeeded");
+    const videoId = current.result?.video_id;
+    // (a skipped upload's summary names the video it already is)
+    if (current.state === "succeeded" && videoId != null && !current.result.skipped) {
+      label.append(" · ", el("a", { href: `/review?video_id=${videoId}` }, `video #${videoId}`));
+    }
+  }
+  return done;
 }
 
 function follow(job, row) {
-  const bar = row.querySelector("progress");
-  const label = row.querySelector(".status");
   const stop = poll(async () => {
-    const current = await api(`${form.dataset.jobs}/${job.id}`);
-    bar.value = current.progress;
-    const done = ["succeeded", "failed", "interrupted"].includes(current.state);
-    label.replaceChildren(el("a", { href: `${form.dataset.jobPage}${current.id}` }, `ingest job #${current.id}`),
-                          `: ${current.state}${done ? ` — ${summary(current)}` : ""}`);
-    const copy = current.result?.copy_of;
-    if (copy) {
-      label.append(el("span", { className: "copy-note" },
-        `Looks like a copy of video ${copy.video_id} (“${copy.video_name}”; ${copy.matched} of ${copy.frames} frames `
-        + "alike): kept in the same scene group, so no split puts them on different sides."));
-    }
-    if (done) {
-      row.classList.toggle("failed", current.state !== "succeeded");
-      const videoId = current.result?.video_id;
-      // (a skipped upload's summary names the video it already is)
-      if (current.state === "succeeded" && videoId != null && !current.result.skipped) {
-        label.append(" · ", el("a", { href: `/review?video_id=${videoId}` }, `video #${videoId}`));
-      }
-      stop();
-    }
+    if (showJob(await api(`${form.dataset.jobs}/${job.id}`), row)) stop();
   }, 1000);
 }
 
+// One file's row. The facts come last: the row's grid puts them on a line of their own, under the name.
+function uploadRow(name, status, facts) {
+  return el("li", {}, el("span", { className: "name", title: name }, name), el("progress", { max: 1, value: 0 }),
+            el("span", { className: "status" }, status), el("span", { className: "file-facts muted" }, facts));
+}
+
+// A reload keeps the list: this curator's latest ingest jobs come back as rows, those still running followed.
+async function restoreRows() {
+  const { items } = await api(`${form.dataset.jobs}?kind=ingest&mine=1&limit=${RESTORED_ROWS}`);
+  for (const job of items) {
+    const row = uploadRow(job.params?.original_name ?? `ingest job #${job.id}`, "",
+                          `uploaded ${clockTime(new Date(job.created_at))}`);
+    list.append(row);
+    if (!showJob(job, row)) follow(job, row);
+  }
+}
+
+const RESTORED_ROWS = 20;
 const button = form.querySelector("button[type=submit]");
 
 form.addEventListener("submit", async (event) => {
@@ -98,10 +119,7 @@ async function uploadAll() {
   const fields = [...new FormData(form)].filter(([key]) => !["file", "prefilter"].includes(key));
   fields.push(["prefilter", form.elements.prefilter.checked ? "1" : "0"]);
   for (const file of files) {
-    // The facts come last: the row's grid puts them on a line of their own, under the name.
-    const row = el("li", {}, el("span", { className: "name", title: file.name }, file.name), el("progress", { max: 1, value: 0 }),
-      el("span", { className: "status" }, "uploading…"),
-      el("span", { className: "file-facts muted" }, fileFacts(file, new Date())));
+    const row = uploadRow(file.name, "uploading…", fileFacts(file, new Date()));
     list.prepend(row);
     if (file.size > Number(form.dataset.maxBytes)) {
       row.querySelector(".status").textContent = "too large for this server's upload limit";
@@ -121,6 +139,8 @@ async function uploadAll() {
     }
   }
 }
+
+restoreRows().catch(() => {});  // a list that cannot be fetched leaves the form as it is
 
 keyboardHelp([
   ["`Enter` in a field", "upload and ingest the chosen files"],

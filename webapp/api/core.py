@@ -23,6 +23,7 @@ from webapp.api.blueprint import api, cursor_args, int_arg, json_body
 from webapp.api.openapi import openapi_document
 from webapp.auth import requires
 from webapp.jobs import runs as run_control
+from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import runtime
 
 
@@ -95,6 +96,12 @@ def list_jobs() -> ResponseReturnValue:
         if state not in JobState.__members__:
             raise InvalidInput(f"state must be one of {', '.join(JobState)}")
         query = query.where(Job.state == JobState(state))
+    if kind := request.args.get("kind"):
+        if kind not in HANDLERS:
+            raise InvalidInput(f"kind must be one of {', '.join(sorted(HANDLERS))}")
+        query = query.where(Job.kind == kind)
+    if request.args.get("mine") == "1":  # the Ingest page's own uploads, whoever else a curator sees
+        query = query.where(Job.created_by_id == current_user.id)
     limit = int_arg("limit", 50, minimum=1, maximum=500)
     page = keyset_page(g.db, query, (Job.id,), limit=limit, descending=True, **cursor_args())
     return {"items": [job_service.job_json(row[0]) for row in page.rows], "prev": page.prev, "next": page.next}

@@ -205,7 +205,9 @@ def openapi_document() -> dict[str, Any]:
             "/stats/proposers": {"get": _op("Per proposer: frames, proposals by fate, acceptance rate, median IoU, "
                                             "misses", "annotator", schema="ProposerStats")},
             "/jobs": {"get": _op("List jobs (annotators: their own)", "annotator", schema="JobList",
-                                 params=[_q("state", "string"), _q("limit", desc="1..500, default 50"), *_CURSORS])},
+                                 params=[_q("state", "string"), _q("kind", "string", "one job kind (ingest, generate, train, …)"),
+                                         _q("mine", "string", "1: only the jobs the caller launched"),
+                                         _q("limit", desc="1..500, default 50"), *_CURSORS])},
             "/jobs/{job_id}": {"get": _op("One job with its log", "annotator", params=[_JOB_ID], schema="Job")},
             "/generate/retry-failed": {"post": _op(
                 "Queue again every failed generate job of an annotated frame that can become a sample now (its "

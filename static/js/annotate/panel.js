@@ -40,8 +40,8 @@ function proposalRow(p, chosen) {
                     ariaCurrent: String(chosen),
                     title: chosen ? "Highlighted: the keys act on it (Tab: the next one)" : "Click to highlight it" },
   el("span", { className: "source" }, p.source),
-  el("span", { className: "score", title: p.hidden ? "The proposer's confidence, 0–1: under the threshold, shown because "
-                + "Show all is on (V)" : "The proposer's confidence, 0–1" }, p.score.toFixed(2)),
+  el("span", { className: "score", title: p.hidden ? `The proposer's confidence, 0–1: under the threshold ${p.threshold.toFixed(2)}, `
+                + "shown because Show all is on (V)" : "The proposer's confidence, 0–1" }, p.score.toFixed(2)),
   el("span", { className: "type", dataset: { guessed: p.illusion_type ? "yes" : "no" } }, p.illusion_type ?? "type?"),
   el("span", { className: "decide" },
     el("button", { type: "button", dataset: { decide: "accept" }, title: "Accept: a plane with its masks, to correct with clicks (a)" },

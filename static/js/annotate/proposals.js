@@ -42,14 +42,17 @@ export function offerProposals(detail) {
 export function proposalsHint() {
   const n = offer.items.filter(isShown).length, more = hiddenLeft();
   if (!n) {
-    return more ? `${plural(more, "proposal")} under the threshold hidden: V shows them — or click inside the illusion.` : null;
+    return more ? `${plural(more, "proposal")} ${under()} hidden: V shows them — or click inside the illusion.` : null;
   }
-  const also = more ? ` (V shows ${more} more under the threshold)` : "";
+  const also = more ? ` (V shows ${more} more ${under()})` : "";
   return `${plural(n, "proposal")} dashed on the frame${also}: A accepts the highlighted one, R rejects it, Tab goes on — `
     + "or click inside the illusion.";
 }
 
 const isShown = (p) => offer.showAll || !p.hidden;
+// The threshold in force when the frame was scanned, "0.50" (each proposer's, "0.50 / 0.30", if they differ).
+const threshold = () => [...new Set(offer.all.map((p) => p.threshold.toFixed(2)))].join(" / ");
+const under = () => `under the threshold ${threshold()}`;
 // How many pending proposals under the threshold "show all" would add (none taken or rejected here).
 function hiddenLeft() {
   if (offer.showAll) return 0;
@@ -63,8 +66,8 @@ export function toggleShowAll() {
   offer.showAll = !offer.showAll;
   render();
   const n = offer.items.filter((p) => p.hidden).length;
-  say(offer.showAll ? `Showing all proposals: ${plural(n, "proposal")} under the threshold too.`
-    : "Showing the proposals at or above the threshold only.");
+  say(offer.showAll ? `Showing all proposals: ${plural(n, "proposal")} ${under()} too.`
+    : `Showing the proposals scoring ${threshold()} or more only.`);
 }
 
 // Whether proposals are still being computed for a frame this annotator holds (worth looking again).
@@ -82,7 +85,7 @@ export const highlighted = (shown = shownProposals()) => shown.find((p) => p.id 
 
 // "plane-break 0.93 · picture"
 export const proposalLabel = (p) => `${p.source} ${p.score.toFixed(2)} · ${p.illusion_type ?? "type?"}`
-  + (p.hidden ? " · under threshold" : "");
+  + (p.hidden ? ` · under ${p.threshold.toFixed(2)}` : "");
 
 // The panel's line about them: why there are none, or how to go through them.
 export function proposalsNote(shown) {
@@ -91,7 +94,7 @@ export function proposalsNote(shown) {
   if (shown.length) return note || "Dashed on the frame; Tab highlights the next one.";
   if (note) return note;
   const more = hiddenLeft();
-  if (more) return `${plural(more, "proposal")} under the threshold ${more === 1 ? "is" : "are"} hidden: V shows them.`;
+  if (more) return `${plural(more, "proposal")} ${under()} ${more === 1 ? "is" : "are"} hidden: V shows them.`;
   return offer.all.length ? decidedNote() : "The proposers found nothing in this frame.";
 }
 
