@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import atexit
+import functools
 import os
 import shutil
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 import urllib.request
 from collections.abc import Iterator
@@ -57,9 +60,30 @@ def stop(proc: subprocess.Popen[str] | subprocess.Popen[bytes]) -> None:
         proc.kill()
 
 
+@functools.cache
+def _demo_videos(videos: int) -> Path:
+    """The demo's synthetic videos, rendered once per test process as `demo` renders them (seed 0, with
+    its spoilt frames): rendering is half of a demo's start, and the files are the same each time."""
+    from dataset.synthetic import write_synthetic_dataset
+
+    root = Path(tempfile.mkdtemp(prefix="demo-videos-"))
+    atexit.register(shutil.rmtree, root, True)
+    write_synthetic_dataset(root / "synthetic", videos=videos, seed=0, defects=True)
+    return root / "synthetic"
+
+
 @contextmanager
 def running_demo(home: Path, videos: int = 1) -> Iterator[str]:
-    """`illusion-studio demo` in a subprocess (worker + server), as `make demo` runs it; yields its URL."""
+    """`illusion-studio demo` in a subprocess (worker + server), as `make demo` runs it; yields its URL.
+    A new ``home`` gets the demo's mark and its rendered videos first; the demo does the rest."""
+    from webapp.cli.demo import DEMO_MARKER
+
+    if not (home / DEMO_MARKER).is_file():
+        assert not home.exists() or not any(home.iterdir()), f"{home} is not a new workspace"
+        home.mkdir(parents=True, exist_ok=True)
+        (home / DEMO_MARKER).write_text("Made for a test, as `illusion-studio demo` makes it.\n", encoding="utf-8")
+    if not (home / "synthetic").exists():
+        shutil.copytree(_demo_videos(videos), home / "synthetic")
     port = free_port()
     env = {k: v for k, v in os.environ.items() if not k.startswith("ILLUSION_STUDIO_")}
     proc = subprocess.Popen([sys.executable, "-m", "webapp.cli", "--data-dir", str(home), "demo", "--port", str(port),
