@@ -14,12 +14,15 @@ monocular input is an independent realistic draw (``dataset.synthetic.mono``'s e
 one than the map its ground truth was made from), not that map itself — in the benchmark only: the
 product's generation keeps deriving the ground truth from the monocular map, as the paper does.
 
-The held-out pairs are frozen: rendered pairs of seeds never seen in training, at the constant
-baseline HELD_OUT_BASELINE_M, whatever the training data holds, with their realistic monocular
+The held-out pairs are frozen: rendered pairs of seeds never seen in training, 100 scenes of
+HELD_OUT_FRAMES frames per set (protocol 3: enough scenes that an interval over scenes can decide), at
+the constant baseline HELD_OUT_BASELINE_M, whatever the training data holds, with their realistic monocular
 disparity as the monocular input; the JSON records their baseline and a hash of their pixels. The
 test pairs (TEST_SEEDS) are scored once; the validation pairs (VAL_SEEDS, ``split="val"``) are what
-the model's decisions are made on. A third set, ``mono="warp"``, asks whether fusion learnt to weigh a
-monocular map against stereo or only the realistic estimator's errors: pairs of seeds of its own
+the model's decisions are made on. Every figure is kept per frame and region
+(``benchmarks.fusion_stats``), every comparison gets a 95 % interval from a bootstrap over scenes and
+seeds, and a decision is made only where the interval excludes 0. A third set, ``mono="warp"``, asks
+whether fusion learnt to weigh a monocular map against stereo or only the realistic estimator's errors: pairs of seeds of its own
 (CORRUPTION_SEEDS), rendered alike, whose monocular input is of another family than the one training
 shows (``dataset.synthetic.corruptions.warped_mono``: a smooth warp of the scene's mono-fooled
 disparity, blur, noise and an unknown affine). Every method is scored densely over the same valid pixels.
@@ -53,6 +56,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 import model
+from benchmarks import fusion_stats as stats
 from benchmarks.trunk import Trunk, compose_init, load_trunk
 from dataset.atomic import atomic_write_bytes
 from dataset.capture.synthetic import import_rendered_video
@@ -74,7 +78,7 @@ from dataset.synthetic import SyntheticVideo, render_video, write_synthetic_data
 from dataset.synthetic.corruptions import warped_mono
 from dataset.synthetic.io import FORMAT as SYNTHETIC_FORMAT
 from dataset.synthetic.mono import realistic_mono, sample_mono_model
-from model.evaluate import EvalOptions, evaluate, sample_metrics
+from model.evaluate import EvalOptions, sample_metrics
 from model.methods import Predict, build_methods
 from model.presets import load_preset
 from webapp.cli.workspace import init_workspace
@@ -82,15 +86,18 @@ from webapp.jobs import runs as run_control
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime
 
-PROTOCOL = 2  # 1: pairs at a baseline from the training data, a split per seed; 2: frozen held-out pairs, one split
+# 1: pairs at a baseline from the training data, a split per seed; 2: frozen held-out pairs, one split;
+# 3: 100 held-out scenes per set, per-frame records and intervals over scenes and seeds
+PROTOCOL = 3
 SIZE = (320, 192)  # W x H of every rendered frame
 FRAMES = 6  # per video
 GENERATED_VIDEOS = 6  # seeds 0..5 through the pipeline
 RENDERED_SEEDS = tuple(range(40, 46))  # imported as captures
-TEST_SEEDS = tuple(range(100, 104))  # held out: never in training or validation; scored once, at the end
-VAL_SEEDS = tuple(range(200, 204))  # held out as well, rendered alike: the model's decisions are made on these
+TEST_SEEDS = tuple(range(20_000, 20_100))  # held out: never in training or validation; scored once, at the end
+VAL_SEEDS = tuple(range(21_000, 21_100))  # held out as well, rendered alike: the model's decisions are made on these
+HELD_OUT_FRAMES = 2  # per held-out scene: frames of one scene are alike, so scenes rather than frames
 SPLITS: dict[str, tuple[int, ...]] = {"test": TEST_SEEDS, "val": VAL_SEEDS}  # the realistic mono's held-out pairs
-CORRUPTION_SEEDS = tuple(range(300, 304))  # held out as well, rendered alike: the warp mono's pairs, no split
+CORRUPTION_SEEDS = tuple(range(22_000, 22_100))  # held out as well, rendered alike: the warp mono's pairs, no split
 MONO_FAMILIES = ("realistic", "warp")  # the held-out pairs' monocular input: the training estimator's family, or not
 HELD_OUT_BASELINE_M = 0.63  # frozen: the baseline protocol 1 derived for the test pairs (0.6279 m), now a constant
 # Per capture video, log-uniform: the held-out pairs at 0.63 m span about 19-51 px (1st-99th percentile)
@@ -98,10 +105,11 @@ HELD_OUT_BASELINE_M = 0.63  # frozen: the baseline protocol 1 derived for the te
 TRAIN_BASELINE_M = (0.35, 1.0)
 _BASELINE_STREAM = 0x62617365  # "base": the capture baselines' random numbers, apart from the scenes'
 GENERATED_MONO_SEED = 1_000_000  # + a generated video's seed: the estimator of its samples' mono input
-REGIONS = ("all", "picture", "mirror", "non_illusion")
+REGIONS = ("all", "illusion", "picture", "mirror", "non_illusion")  # illusion: pictures and mirrors together
 BASELINES = ("mono_gt_align", "sgbm")  # untrained: scored once per benchmark, not per seed
 TRAIN_OVERRIDES: dict[str, Any] = {"train.batch_size": 2, "train.crop": (160, 288), "train.val_every": 200,
                                    "train.checkpoint_every": 200}
+HEADROOM_PX = 1.0  # the oracle gate's gain inside illusions below which the networks have nothing to decide
 DEFAULT_STEPS = 1500  # from scratch
 FINETUNE_STEPS = 500  # from the pre-trained trunk: the paper fine-tunes briefly on illusions after pre-training
 SPLIT = "train=0.85,val=0.15"
@@ -129,6 +137,9 @@ FUSION = Network("fusion", {}, {"fusion": "fusion", "stereo": "stereo"})
 # never sees the mono input.
 ABLATIONS = (Network("no_vlm", {"model.use_vlm": False}, {"fusion_no_vlm": "fusion", "stereo_no_vlm": "stereo"}),
              Network("stereo_only", {"model.use_vlm": False, "model.use_mono": False}, {"stereo_only": "stereo"}))
+# Scored, never trained: the trunk composed as the no-VLM network (its fresh confidence and fusion heads
+# from the seed), at 0 steps. What fine-tuning adds is measured against it.
+TRUNK_AT_0 = Network("trunk_0", {"model.use_vlm": False}, {"trunk_0": "fusion", "trunk_0_stereo": "stereo"})
 
 
 def run_fusion_bench(work_dir: Path, *, seeds: int = 1, steps: int = DEFAULT_STEPS, ablations: bool = False,
@@ -153,10 +164,13 @@ def run_fusion_bench(work_dir: Path, *, seeds: int = 1, steps: int = DEFAULT_STE
     pairs, render_s, info = _held_out(split, mono)
     networks = (FUSION, *ABLATIONS) if ablations else (FUSION,)
     timed = time.perf_counter()
-    baselines = _score(pairs, build_methods(list(BASELINES), checkpoint=None, predictions=None, mono_dir=None))
+    baseline_scores = score_frames(pairs, build_methods(list(BASELINES), checkpoint=None, predictions=None,
+                                                        mono_dir=None), oracles=["sgbm"])
+    baselines = baseline_scores.means()
     baselines_s = time.perf_counter() - timed
     train_seeds = training_seeds(rt, seeds)
-    inits, init_report = _inits(rt, trunk, networks, train_seeds, steps, overrides)
+    inits, init_report = _inits(rt, trunk, (*networks, *((TRUNK_AT_0,) if trunk else ())), train_seeds, steps,
+                                overrides)
     ledger, fingerprint = rt.settings.home / TRAINED, model_fingerprint()
     launched: dict[tuple[int, str], int] = {}
     reused: list[int] = []
@@ -174,17 +188,22 @@ def run_fusion_bench(work_dir: Path, *, seeds: int = 1, steps: int = DEFAULT_STE
     timed = time.perf_counter()
     run_jobs(rt, workers, launched.values())
     train_wall_s = time.perf_counter() - timed
-    runs = [_seed_scores(rt, k, pairs, networks, launched) for k in range(seeds)]
+    scored = (*networks, *((TRUNK_AT_0,) if trunk else ()))
+    runs = [_seed_scores(rt, k, pairs, scored, launched, inits) for k in range(seeds)]
     rt.close()
+    record = held_out_record(pairs, [r["scores"] for r in runs], baseline_scores)
     return {
         "protocol": PROTOCOL,
         "methods": {**_aggregate([r["methods"] for r in runs]), **_aggregate([baselines])},
         "paired": paired_differences([{**r["methods"], **baselines} for r in runs], "fusion"),
+        "intervals": intervals(record, "fusion"),
+        "per_frame": record,
         "per_seed": [{"seed": k, "train_seed": seed, "runs": runs[k]["runs"], "methods": _rounded(runs[k]["methods"])}
                      for k, seed in enumerate(train_seeds)],
         "seeds": seeds, "split_seed": SPLIT_SEED, "train_seeds": train_seeds, "steps": steps, "preset": "lite",
         "overrides": overrides, "size": f"{SIZE[0]}x{SIZE[1]}", "workers": workers, "reused_runs": reused,
-        "networks": {n.name: {"overrides": dict(n.overrides), "methods": list(n.methods)} for n in networks},
+        "networks": {n.name: {"overrides": dict(n.overrides), "methods": list(n.methods), "trained": n is not TRUNK_AT_0}
+                     for n in scored},
         "pretrained": None if trunk is None else {"file": trunk.name, "sha256": trunk.sha256, "recipe": trunk.recipe,
                                                   "init": init_report},
         "conditions": {"training": train_conditions, "held_out": condition_ranges(condition_values(pairs))},
@@ -193,7 +212,7 @@ def run_fusion_bench(work_dir: Path, *, seeds: int = 1, steps: int = DEFAULT_STE
                       "score_baselines": round(baselines_s, 1),
                       "train": {n.name: [r["train_s"][n.name] for r in runs] for n in networks},
                       "train_wall": round(train_wall_s, 1),
-                      "score": {n.name: [r["score_s"][n.name] for r in runs] for n in networks},
+                      "score": {n.name: [r["score_s"][n.name] for r in runs] for n in scored},
                       "total": round(time.perf_counter() - started, 1)},
     }
 
@@ -244,7 +263,7 @@ def _held_out(split: str | None, mono: str = "realistic") -> tuple[list[StereoSa
     return pairs, time.perf_counter() - started, info
 
 
-def held_out_samples(seeds: Iterable[int], frames: int = FRAMES, *, mono: str = "realistic") -> list[StereoSample]:
+def held_out_samples(seeds: Iterable[int], frames: int = HELD_OUT_FRAMES, *, mono: str = "realistic") -> list[StereoSample]:
     """The held-out rendered pairs: ``frames`` of each seed, at SIZE and HELD_OUT_BASELINE_M, with the
     monocular input ``mono`` (see :func:`video_samples`). Nothing of the training data enters them."""
     return [sample for seed in seeds
@@ -259,7 +278,7 @@ def test_samples(_train_range: object, seeds: tuple[int, ...] = TEST_SEEDS,
 
 
 def video_samples(video: SyntheticVideo, mono: str = "realistic") -> list[StereoSample]:
-    """A rendered video's frames as samples: regions all / picture / mirror / non_illusion; mono = the
+    """A rendered video's frames as samples: regions all / illusion / picture / mirror / non_illusion; mono = the
     realistic monocular disparity, or with ``mono="warp"`` the frame's :func:`warped_mono`; meta ``seed``
     and ``mirror_fooling_px`` (frames with mirror pixels)."""
     samples = []
@@ -272,7 +291,8 @@ def video_samples(video: SyntheticVideo, mono: str = "realistic") -> list[Stereo
                    } if mirror.any() else {}
         samples.append(StereoSample(
             name=f"{video.name}/{frame.index:04d}", left=frame.left, right=frame.right,
-            disparity=frame.disparity, regions=make_regions(frame.disparity, {**masks, "non_illusion": ~illusion}),
+            disparity=frame.disparity,
+            regions=make_regions(frame.disparity, {"illusion": illusion, **masks, "non_illusion": ~illusion}),
             mono=frame.mono_disparity if mono == "realistic" else warped_mono(frame.mono_ideal, video.seed, frame.index),
             meta={"seed": video.seed, **fooling}))
     return samples
@@ -487,15 +507,35 @@ def split_keeping_seeds(version: Mapping[str, Any], count: int) -> list[int]:
                        f"{SPLIT_SEED} does; fewer seeds, or fewer videos, would do")
 
 
-def run_mono_bench(*, split: str | None = None, mono: str = "realistic") -> dict[str, Any]:
-    """mono-gt-align on the held-out pairs of ``split`` and ``mono`` (:func:`held_out_seeds`), no training:
-    EPE and bad-2 per region, the non-illusion bad-2 (the monocular model's calibration figure) on top,
-    and the pairs' conditions."""
+def run_mono_bench(*, split: str | None = None, mono: str = "realistic", work_dir: Path | None = None,
+                   pretrained: Path | None = None) -> dict[str, Any]:
+    """No training: mono-gt-align on the held-out pairs of ``split`` and ``mono`` (:func:`held_out_seeds`) —
+    EPE and bad-2 per region, the non-illusion bad-2 (the monocular model's calibration figure) on top — and
+    the oracle gate's headroom per region (per pixel the better of a stereo map and the aligned mono,
+    against the stereo map alone, with its interval over scenes) for SGBM and, given the trunk file
+    ``pretrained``, for the trunk's stereo branch at 0 steps (its init written under ``work_dir``). A gate
+    can only learn what the oracle gains: ``headroom_ok`` says whether it is at least HEADROOM_PX inside
+    illusions for the stereo map the networks start from (the trunk's, else SGBM's)."""
     started = time.perf_counter()
     pairs, _render_s, info = _held_out(split, mono)
-    figures = mono_figures(pairs)
-    return {"non_illusion_bad2": figures["non_illusion"]["bad2"], "methods": {"mono_gt_align": figures},
+    methods = build_methods(["mono_gt_align", *BASELINES[1:]], checkpoint=None, predictions=None, mono_dir=None)
+    trunk = load_trunk(pretrained) if pretrained is not None else None
+    if trunk is not None:
+        config = load_preset("lite", network_overrides(TRUNK_AT_0, FINETUNE_STEPS))
+        init = (work_dir or Path(".")) / "inits" / f"trunk_0-{trunk.sha256[:12]}.pt"
+        compose_init(trunk, config, SPLIT_SEED, init)
+        methods["trunk_0_stereo"] = build_methods(["stereo"], checkpoint=init, predictions=None, mono_dir=None)["stereo"]
+    stereos = ["sgbm", *(["trunk_0_stereo"] if trunk is not None else [])]
+    scores = score_frames(pairs, methods, oracles=stereos)
+    figures = {m: {r: {k: round(v, 3) for k, v in f.items()} for r, f in regions.items()}
+               for m, regions in scores.means().items()}
+    oracle = intervals(held_out_record(pairs, [], scores), "mono_gt_align")["oracle"]
+    inside = oracle[stereos[-1]]["illusion"]["value"]
+    return {"non_illusion_bad2": figures["mono_gt_align"]["non_illusion"]["bad2"], "methods": figures,
+            "oracle_headroom_px": oracle, "headroom_ok": {"stereo": stereos[-1], "illusion_px": round(inside, 3),
+                                                          "needed_px": HEADROOM_PX, "ok": inside >= HEADROOM_PX},
             "size": f"{SIZE[0]}x{SIZE[1]}", "pairs": info,
+            "pretrained": None if trunk is None else {"file": trunk.name, "sha256": trunk.sha256},
             "conditions": {"held_out": condition_ranges(condition_values(pairs))},
             "seconds": round(time.perf_counter() - started, 1)}
 
@@ -507,23 +547,118 @@ def mono_figures(samples: list[StereoSample]) -> dict[str, dict[str, float]]:
 
 
 def _seed_scores(rt: Runtime, k: int, pairs: list[StereoSample], networks: tuple[Network, ...],
-                 launched: Mapping[tuple[int, str], int]) -> dict[str, Any]:
-    """Each of ``networks`` of benchmark seed ``k`` (its run id in ``launched``) scored on ``pairs``: their
-    figures by report key, and per network its run id and the seconds its training and its scoring took."""
-    figures: dict[str, Any] = {}
+                 launched: Mapping[tuple[int, str], int], inits: Mapping[tuple[int, str], Path]) -> dict[str, Any]:
+    """Each of ``networks`` of benchmark seed ``k`` scored on ``pairs`` frame by frame (one pass): its
+    trained best checkpoint (its run id in ``launched``), or for TRUNK_AT_0 its init checkpoint in
+    ``inits``, untrained. Returns the FrameScores (each fusion method's gate over its own stereo branch,
+    each stereo branch's oracle), the mean figures by report key, and per network its run id (trained
+    ones), the seconds its training and its scoring took."""
+    methods: dict[str, Predict] = {}
     runs: dict[str, int] = {}
     train_s: dict[str, float] = {}
-    score_s: dict[str, float] = {}
     for network in networks:
-        run_id = launched[k, network.name]
-        checkpoint, seconds = trained_checkpoint(rt, run_id)
-        started = time.perf_counter()
+        if network is TRUNK_AT_0:
+            checkpoint, seconds = inits[k, network.name], 0.0
+        else:
+            run_id = launched[k, network.name]
+            checkpoint, seconds = trained_checkpoint(rt, run_id)
+            runs[network.name] = run_id
+        train_s[network.name] = round(seconds, 1)
         built = build_methods(sorted(set(network.methods.values())), checkpoint=checkpoint, predictions=None,
                               mono_dir=None)
-        figures.update(_score(pairs, {key: built[method] for key, method in network.methods.items()}))
-        runs[network.name], train_s[network.name] = run_id, round(seconds, 1)
-        score_s[network.name] = round(time.perf_counter() - started, 1)
-    return {"methods": figures, "runs": runs, "train_s": train_s, "score_s": score_s}
+        methods.update({key: built[method] for key, method in network.methods.items()})
+    gates = {fused: stereo for network in networks for fused, stereo in _gate_of(network)}
+    stereos = [key for network in networks for key, method in network.methods.items() if method == "stereo"]
+    scores = score_frames(pairs, methods, gates=gates, oracles=stereos)
+    score_s = {network.name: round(sum(scores.seconds[key] for key in network.methods), 1) for network in networks}
+    return {"scores": scores, "methods": scores.means(), "runs": runs, "train_s": train_s, "score_s": score_s}
+
+
+def _gate_of(network: Network) -> list[tuple[str, str]]:
+    """(fused report key, its own stereo branch's report key) of a network that fuses; none otherwise."""
+    fused = [key for key, method in network.methods.items() if method == "fusion"]
+    stereo = [key for key, method in network.methods.items() if method == "stereo"]
+    return list(zip(fused, stereo, strict=True)) if fused and stereo else []
+
+
+def held_out_record(pairs: list[StereoSample], per_seed: list[FrameScores], baselines: FrameScores) -> dict[str, Any]:
+    """The per-frame record of a benchmark (JSON): the frames (sample name, scene seed), each region's
+    pixel count per frame, per method and region each seed's per-frame EPE and bad-2 (the untrained
+    baselines: one row), and per gate its per-frame sums (``fusion_stats.gate_sums``), likewise."""
+    def rows(values: list[float]) -> list[float | None]:
+        return [None if not np.isfinite(v) else round(float(v), 4) for v in values]
+
+    runs = [r for r in ([*per_seed], [baselines]) if r]
+    methods: dict[str, Any] = {}
+    for scores_of_seeds in runs:
+        for method in scores_of_seeds[0].figures:
+            methods[method] = {r: {k: [rows(s.figures[method][r][k]) for s in scores_of_seeds] for k in ("epe", "bad2")}
+                               for r in REGIONS}
+    gates: dict[str, Any] = {}
+    for scores_of_seeds in runs:
+        for gate in scores_of_seeds[0].gates:
+            gates[gate] = {r: {k: [rows(s.gates[gate][r][k]) for s in scores_of_seeds]
+                               for k in scores_of_seeds[0].gates[gate][r]} for r in REGIONS}
+    return {"frames": [{"sample": p.name, "scene": int(p.meta["seed"])} for p in pairs],
+            "pixels": baselines.pixels, "methods": methods, "gates": gates}
+
+
+def _seed_rows(record: Mapping[str, Any], method: str, region: str, key: str, seeds: int) -> np.ndarray:
+    """(seeds, frames) of a method's per-frame ``key`` in ``region`` (a baseline's one row repeated)."""
+    values = np.array(record["methods"][method][region][key], dtype=np.float64)
+    return np.repeat(values, seeds, axis=0) if len(values) == 1 else values
+
+
+def intervals(record: Mapping[str, Any], reference: str) -> dict[str, Any]:
+    """From a :func:`held_out_record`, 95 % intervals over scenes and seeds (``fusion_stats``):
+    ``methods`` each method's EPE and bad-2 per region; ``against`` ``reference`` minus every other method,
+    per region, with ``decided`` (lower / higher / undecided); ``isolation`` each fused method minus its own
+    stereo branch; ``oracle`` per stereo method its oracle gate's headroom (its EPE minus the oracle's,
+    px); ``capture`` per gate the share of its stereo branch's oracle headroom it takes,
+    Σ(e_stereo - e_fused) / Σ max(0, e_stereo - e_mono)."""
+    scenes = [f["scene"] for f in record["frames"]]
+    seeds = max(len(v["all"]["epe"]) for v in record["methods"].values())
+
+    def rows(method: str, region: str, key: str) -> np.ndarray:
+        return _seed_rows(record, method, region, key, seeds)
+
+    def difference(a: str, b: str, region: str, key: str) -> dict[str, Any]:
+        found = stats.mean_interval(rows(a, region, key) - rows(b, region, key), scenes)
+        return {**stats.rounded(found), "decided": stats.decided(found)}
+
+    methods = list(record["methods"])
+    pairs = {fused: stereo for fused, stereo in _gates_in(record)}
+    out: dict[str, Any] = {
+        "level": stats.LEVEL, "replicates": stats.REPLICATES, "scenes": len(set(scenes)), "seeds": seeds,
+        "methods": {m: {r: {k: stats.rounded(stats.mean_interval(rows(m, r, k), scenes)) for k in ("epe", "bad2")}
+                        for r in REGIONS} for m in methods},
+        "against": {m: {r: {k: difference(reference, m, r, k) for k in ("epe", "bad2")} for r in REGIONS}
+                    for m in methods if m != reference and reference in methods},
+        "isolation": {f"{fused} - {stereo}": {r: {"epe": difference(fused, stereo, r, "epe")} for r in REGIONS}
+                      for fused, stereo in pairs.items()},
+        "oracle": {}, "capture": {}}
+    pixels = np.array([record["pixels"][r] for r in REGIONS], dtype=np.float64)
+    for gate, regions in record["gates"].items():
+        for region_index, region in enumerate(REGIONS):
+            sums = {k: np.repeat(np.array(v, np.float64), seeds, axis=0) if len(v) == 1 else np.array(v, np.float64)
+                    for k, v in regions[region].items()}
+            if gate.startswith("oracle:"):
+                stereo = gate.partition(":")[2]
+                per_pixel = np.where(pixels[region_index] > 0, pixels[region_index], np.nan)
+                headroom = rows(stereo, region, "epe") - sums["oracle"] / per_pixel
+                out["oracle"].setdefault(stereo, {})[region] = stats.rounded(stats.mean_interval(headroom, scenes))
+            else:
+                out["capture"].setdefault(gate, {})[region] = stats.rounded(
+                    stats.bootstrap_ratio(sums["gain"], sums["headroom"], scenes))
+    return out
+
+
+def _gates_in(record: Mapping[str, Any]) -> list[tuple[str, str]]:
+    """(fused, stereo) of every gate of a record: the networks' report keys (``FUSION`` and ABLATIONS'
+    and TRUNK_AT_0's) whose fused method has a gate."""
+    keys = [k for k in record["gates"] if not k.startswith("oracle:")]
+    return [(fused, stereo) for network in (FUSION, *ABLATIONS, TRUNK_AT_0) for fused, stereo in _gate_of(network)
+            if fused in keys]
 
 
 def network_overrides(network: Network, steps: int, overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
@@ -631,13 +766,68 @@ def trained_checkpoint_path(rt: Runtime, run_id: int) -> Path:
     return training.run_dir(rt.settings.runs_dir, run_id) / "checkpoints" / "best.pt"
 
 
+@dataclass
+class FrameScores:
+    """The per-frame record of scoring ``methods`` on pairs (``fusion_stats``): per method and region each
+    frame's ``epe`` (px) and ``bad2`` (%) (NaN: the frame has none of the region); per region each frame's
+    pixel count; per gate (a fused method, or ``oracle:<stereo method>``) and region each frame's sums of
+    ``fusion_stats.gate_sums``; the seconds each method's predictions took."""
+
+    figures: dict[str, dict[str, dict[str, list[float]]]]
+    pixels: dict[str, list[int]]
+    gates: dict[str, dict[str, dict[str, list[float]]]]
+    seconds: dict[str, float]
+
+    def means(self) -> dict[str, dict[str, dict[str, float]]]:
+        """EPE (px) and bad-2 (%) per method and region, mean over the frames holding the region."""
+        return {m: {r: {k: float(np.nanmean(v)) for k, v in f.items()} for r, f in regions.items()}
+                for m, regions in self.figures.items()}
+
+
+def score_frames(pairs: list[StereoSample], methods: Mapping[str, Predict], *, gates: Mapping[str, str] | None = None,
+                 oracles: Iterable[str] = ()) -> FrameScores:
+    """Every method of ``methods`` on every pair, frame by frame and region by region of REGIONS; for each
+    ``gates`` entry (fused method → the stereo method it was built on) the gate's sums, and for each stereo
+    method of ``oracles`` the oracle gate's against the GT-aligned mono (``fusion_stats.gate_sums``).
+    RuntimeError naming the first pair a method cannot predict."""
+    gates = dict(gates or {})
+    oracles = tuple(oracles)
+    align = build_methods(["mono_gt_align"], checkpoint=None, predictions=None, mono_dir=None)["mono_gt_align"]
+    figures: dict[str, dict[str, dict[str, list[float]]]] = {m: {r: {"epe": [], "bad2": []} for r in REGIONS}
+                                                            for m in methods}
+    gate_keys = [*gates, *(f"oracle:{m}" for m in oracles)]
+    sums: dict[str, dict[str, dict[str, list[float]]]] = {g: {r: {} for r in REGIONS} for g in gate_keys}
+    pixels: dict[str, list[int]] = {r: [] for r in REGIONS}
+    seconds = dict.fromkeys(methods, 0.0)
+    for sample in pairs:
+        errors: dict[str, np.ndarray] = {}
+        for name, predict in methods.items():
+            started = time.perf_counter()
+            try:
+                prediction = predict(sample)
+            except Exception as exc:  # a benchmark reports which pair broke, then stops
+                raise RuntimeError(f"benchmark: {name} failed on {sample.name}: {exc}") from exc
+            seconds[name] += time.perf_counter() - started
+            errors[name] = stats.frame_errors(prediction, sample.disparity)
+        mono_errors = stats.frame_errors(align(sample), sample.disparity) if gate_keys else None
+        for region in REGIONS:
+            where = sample.regions.get(region, np.zeros(sample.disparity.shape, bool)) & np.isfinite(sample.disparity)
+            for name in methods:
+                found = stats.region_figures(errors[name], where)
+                figures[name][region]["epe"].append(found["epe"])
+                figures[name][region]["bad2"].append(found["bad2"])
+            pixels[region].append(int(np.count_nonzero(where)))
+            for key in gate_keys:
+                fused, stereo = (None, key.partition(":")[2]) if key.startswith("oracle:") else (key, gates[key])
+                found = stats.gate_sums(errors[stereo], None if fused is None else errors[fused], mono_errors, where)
+                for name, value in found.items():
+                    sums[key][region].setdefault(name, []).append(value)
+    return FrameScores(figures, pixels, sums, {m: round(v, 1) for m, v in seconds.items()})
+
+
 def _score(pairs: list[StereoSample], methods: dict[str, Predict]) -> dict[str, dict[str, dict[str, float]]]:
     """EPE (px) and bad-2 (%) per method and region of REGIONS, mean over ``pairs``."""
-    report = evaluate(pairs, methods, EvalOptions(regions=REGIONS))
-    if report["failed"]:
-        raise RuntimeError(f"benchmark evaluation failed on {report['failed'][:3]}")
-    return {m: {r: {k: d["regions"][r][k] for k in ("epe", "bad2")} for r in REGIONS}
-            for m, d in report["methods"].items()}
+    return score_frames(pairs, methods).means()
 
 
 def _rounded(figures: dict[str, Any]) -> dict[str, Any]:

@@ -19,6 +19,7 @@ Remove this module once a pytest-xdist release carries those fixes.
 
 from __future__ import annotations
 
+import contextlib
 from typing import Any
 
 import pytest
@@ -42,10 +43,8 @@ class CrashSafeLoadFileScheduling(LoadFileScheduling):
         return crashitem
 
     def _assign_work_unit(self, node: WorkerController) -> None:
-        try:
+        with contextlib.suppress(OSError):  # "cannot send (already closed?)": remove_node requeues the unit
             super()._assign_work_unit(node)
-        except OSError:  # "cannot send (already closed?)": remove_node requeues the unit
-            pass
 
     def schedule(self) -> None:
         replacing = self.collection is not None

@@ -86,18 +86,28 @@ def test_fusion_networks_fuse_and_use_the_mono_input() -> None:
         assert not torch.equal(a.stereo, b.stereo)  # the mono input reaches the stereo branch's context
 
 
-def test_validation_split_has_seeds_of_its_own() -> None:
-    training_seeds = set(range(fusion.GENERATED_VIDEOS)) | set(fusion.RENDERED_SEEDS)
-    assert set(fusion.SPLITS) == {"test", "val"} and fusion.SPLITS["test"] == tuple(range(100, 104))
-    val = set(fusion.SPLITS["val"])
-    assert len(val) == 4 and not val & (training_seeds | set(fusion.TEST_SEEDS))
+def test_held_out_sets_are_100_scenes_of_their_own(monkeypatch: pytest.MonkeyPatch) -> None:
+    from benchmarks.pretrain import PRETRAIN_FIRST_SEED, PRETRAIN_VIDEOS
+
+    training = set(range(fusion.GENERATED_VIDEOS)) | set(fusion.RENDERED_SEEDS)
+    pretraining = set(range(PRETRAIN_FIRST_SEED, PRETRAIN_FIRST_SEED + PRETRAIN_VIDEOS))
+    sets = {"test": set(fusion.TEST_SEEDS), "val": set(fusion.VAL_SEEDS), "warp": set(fusion.CORRUPTION_SEEDS)}
+    assert set(fusion.SPLITS) == {"test", "val"} and all(len(seeds) == 100 for seeds in sets.values())
+    for name, seeds in sets.items():
+        others = set().union(*(v for k, v in sets.items() if k != name))
+        assert not seeds & (training | pretraining | others), name
+    # rendering all 200 frames is the benchmark's business: two scenes show what each pair carries
+    render = fusion.held_out_samples
+    monkeypatch.setattr(fusion, "held_out_samples", lambda seeds, mono: render(seeds[:2], mono=mono))
     pairs, _render_s, info = fusion._held_out("val")
-    assert info["split"] == "val" and info["seeds"] == sorted(val) and info["samples"] == len(pairs) == 4 * fusion.FRAMES
-    assert info["baseline_m"] == fusion.HELD_OUT_BASELINE_M == 0.63
-    assert {p.meta["seed"] for p in pairs} == val
-    test_probe = fusion.held_out_samples(fusion.TEST_SEEDS[:1], frames=1)
+    assert info["split"] == "val" and info["seeds"] == sorted(sets["val"]) and info["samples"] == len(pairs) == 4
+    assert info["baseline_m"] == fusion.HELD_OUT_BASELINE_M == 0.63 and fusion.HELD_OUT_FRAMES == 2
+    assert {p.meta["seed"] for p in pairs} == set(fusion.VAL_SEEDS[:2])
+    test_probe = render(fusion.TEST_SEEDS[:1], frames=1)
     assert test_probe[0].name.split("/")[0] not in {p.name.split("/")[0] for p in pairs}
-    assert all(p.mono is not None and {"picture", "mirror", "non_illusion"} <= set(p.regions) for p in pairs)
+    for pair in pairs:
+        assert pair.mono is not None and set(pair.regions) == set(fusion.REGIONS)
+        assert np.array_equal(pair.regions["illusion"], pair.regions["picture"] | pair.regions["mirror"])
     with pytest.raises(ValueError, match="unknown split"):
         fusion._held_out("train")
 
@@ -160,7 +170,8 @@ def test_report_carries_every_method_the_paired_record_and_the_timings(tmp_path:
     assert drained == [2] and report["workers"] == 2
     methods = report["methods"]
     trained = ["fusion", "stereo", "fusion_no_vlm", "stereo_no_vlm", "stereo_only"]
-    assert list(methods) == [*trained, "mono_gt_align", "sgbm"]
+    scored = [*trained, "trunk_0", "trunk_0_stereo"]  # the trunk at 0 steps: scored, never trained
+    assert list(methods) == [*scored, "mono_gt_align", "sgbm"]
     for method, regions in methods.items():
         assert set(regions) == set(fusion.REGIONS)
         for figures in regions.values():
@@ -173,11 +184,11 @@ def test_report_carries_every_method_the_paired_record_and_the_timings(tmp_path:
     assert [(r["seed"], r["train_seed"]) for r in report["per_seed"]] == [(0, 0), (1, 7)]
     assert report["train_seeds"] == [0, 7] and report["split_seed"] == fusion.SPLIT_SEED
     for k, record in enumerate(report["per_seed"]):
-        assert list(record["methods"]) == trained and record["runs"] == {"fusion": 3 * k + 1, "no_vlm": 3 * k + 2,
+        assert list(record["methods"]) == scored and record["runs"] == {"fusion": 3 * k + 1, "no_vlm": 3 * k + 2,
                                                                         "stereo_only": 3 * k + 3}
     paired = report["paired"]
     assert paired["reference"] == "fusion" and paired["seeds"] == 2
-    assert list(paired["against"]) == [*trained[1:], "mono_gt_align", "sgbm"]
+    assert list(paired["against"]) == [*scored[1:], "mono_gt_align", "sgbm"]
     runs = report["per_seed"]
     mean = (runs[0]["methods"]["fusion"]["mirror"]["epe"] - runs[0]["methods"]["stereo_no_vlm"]["mirror"]["epe"]
             + runs[1]["methods"]["fusion"]["mirror"]["epe"] - runs[1]["methods"]["stereo_no_vlm"]["mirror"]["epe"]) / 2
@@ -185,7 +196,8 @@ def test_report_carries_every_method_the_paired_record_and_the_timings(tmp_path:
     # what each network took from the trunk, and what started fresh
     init = report["pretrained"]["init"]
     assert report["pretrained"]["sha256"] == json.loads((trunk_file.with_suffix(".json")).read_text())["sha256"]
-    assert {name: init[name]["loaded"] for name in init} == {"fusion": 126, "no_vlm": 126, "stereo_only": 126}
+    assert {name: init[name]["loaded"] for name in init} == {"fusion": 126, "no_vlm": 126, "stereo_only": 126,
+                                                            "trunk_0": 126}
     assert {n.split(".")[0] for n in init["fusion"]["fresh"]} == {"vlm", "confidence", "fusion"}
     assert {n.split(".")[0] for n in init["no_vlm"]["fresh"]} == {"confidence", "fusion"}
     assert init["stereo_only"]["fresh"] == [] and all(not i["unused"] for i in init.values())
@@ -194,10 +206,34 @@ def test_report_carries_every_method_the_paired_record_and_the_timings(tmp_path:
     timings = report["timings_s"]
     assert set(timings) == {"prepare", "render_pairs", "score_baselines", "train", "train_wall", "score", "total"}
     assert timings["train"] == {"fusion": [0.5, 2.0], "no_vlm": [1.0, 2.5], "stereo_only": [1.5, 3.0]}
+    assert set(timings["score"]) == {"fusion", "no_vlm", "stereo_only", "trunk_0"}
     assert all(len(v) == 2 and min(v) > 0 for v in timings["score"].values())
     assert report["pairs"]["split"] == "val" and report["pairs"]["seeds"] == list(fusion.VAL_SEEDS)
-    assert report["pairs"]["baseline_m"] == 0.63 and report["protocol"] == 2
+    assert report["pairs"]["baseline_m"] == 0.63 and report["protocol"] == 3
     assert report["networks"]["stereo_only"]["overrides"] == {"model.use_vlm": False, "model.use_mono": False}
+    assert report["networks"]["trunk_0"]["trained"] is False and report["networks"]["fusion"]["trained"] is True
+    # the per-frame record: every frame and region, each seed's row (the baselines: one), and the gates' sums
+    frames = report["per_frame"]
+    assert [f["scene"] for f in frames["frames"]] == list(fusion.VAL_SEEDS[:2])
+    assert set(frames["pixels"]) == set(fusion.REGIONS) and frames["pixels"]["all"][0] > 0
+    assert [len(frames["methods"][m]["all"]["epe"]) for m in ("fusion", "sgbm")] == [2, 1]
+    for seed in range(2):  # the record's frames give back the figures
+        assert np.mean(frames["methods"]["fusion"]["mirror"]["epe"][seed]) == pytest.approx(
+            report["per_seed"][seed]["methods"]["fusion"]["mirror"]["epe"], abs=1e-3)
+    assert set(frames["gates"]) == {"fusion", "fusion_no_vlm", "trunk_0", "oracle:sgbm", "oracle:stereo",
+                                    "oracle:stereo_no_vlm", "oracle:stereo_only", "oracle:trunk_0_stereo"}
+    # the intervals: every difference decided or not, the isolation rows, the oracle and each gate's capture
+    found = report["intervals"]
+    assert found["scenes"] == 2 and found["seeds"] == 2 and found["level"] == 0.95
+    for method, regions in found["against"].items():
+        for region, figures in regions.items():
+            epe = figures["epe"]
+            assert epe["low"] <= epe["value"] <= epe["high"] and epe["decided"] in ("lower", "higher", "undecided")
+            assert epe["value"] == pytest.approx(report["paired"]["against"][method][region]["epe"], abs=2e-3)
+    assert set(found["isolation"]) == {"fusion - stereo", "fusion_no_vlm - stereo_no_vlm", "trunk_0 - trunk_0_stereo"}
+    assert set(found["oracle"]) == {"sgbm", "stereo", "stereo_no_vlm", "stereo_only", "trunk_0_stereo"}
+    assert all(v["all"]["value"] >= 0 for v in found["oracle"].values())  # the oracle is never worse than its stereo
+    assert set(found["capture"]) == {"fusion", "fusion_no_vlm", "trunk_0"}
     json.dumps(report, allow_nan=False)
 
 
@@ -238,10 +274,16 @@ def test_cli_passes_ablations_split_and_the_trunk(tmp_path: Path, monkeypatch: p
         assert calls[0]["pretrained"] == (expected if flags[:1] != ["--pretrained"] else tmp_path / "other"), flags
         # fine-tuning from a trunk is short; from scratch the benchmark trains longer
         assert calls[0]["steps"] == (fusion.DEFAULT_STEPS if flags == ["--scratch"] else fusion.FINETUNE_STEPS), flags
-    for flags in (["--ablations"], ["--workers", "2"], ["--scratch"], ["--pretrained", str(trunk)],
-                  ["--set", "fusion_gate=true"]):
+    for flags in (["--ablations"], ["--workers", "2"], ["--set", "fusion_gate=true"]):
         result = CliRunner().invoke(main, ["bench", "fusion", "--mono-only", *flags])
         assert result.exit_code == 2 and "--mono-only" in result.output, flags
+    # --mono-only's oracle uses the trunk's stereo branch at 0 steps: the trunk is found as for training
+    mono_calls: list[dict[str, Any]] = []
+    monkeypatch.setattr(fusion, "run_mono_bench", lambda **kw: mono_calls.append(kw) or {"ok": 1})
+    for flags, expected in (([], trunk), (["--scratch"], None), (["--pretrained", str(tmp_path / "other")],
+                                                                 tmp_path / "other")):
+        result = CliRunner().invoke(main, ["bench", "fusion", "--mono-only", "--json", *work, *flags])
+        assert result.exit_code == 0 and mono_calls[-1]["pretrained"] == expected, (flags, result.output)
     result = CliRunner().invoke(main, ["bench", "fusion", "--scratch", "--pretrained", str(trunk)])
     assert result.exit_code == 2 and "--scratch" in result.output
     assert CliRunner().invoke(main, ["bench", "fusion", "--split", "train"]).exit_code == 2

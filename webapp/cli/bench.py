@@ -208,7 +208,8 @@ def _lite_overrides(ctx: click.Context, param: click.Parameter, values: tuple[st
 @click.option("--work-dir", type=click.Path(file_okay=False, path_type=Path), default=Path("var/bench-fusion"),
               show_default=True, help="Where the prepared data (and the pre-trained trunk) is cached between runs.")
 @click.option("--mono-only", is_flag=True,
-              help="No training: score mono-gt-align alone on the held-out pairs (the monocular input's calibration).")
+              help="No training: score mono-gt-align on the held-out pairs (the monocular input's calibration) and "
+                   "the oracle gate's headroom per region over SGBM and the trunk's stereo branch at 0 steps.")
 @click.option("--ablations", is_flag=True, is_eager=True,
               help="Per seed, also train the no-VLM network (use_vlm = false) and the stereo-only one (use_mono = false).")
 @click.option("--split", type=click.Choice(["test", "val"]), default=None,
@@ -217,7 +218,7 @@ def _lite_overrides(ctx: click.Context, param: click.Parameter, values: tuple[st
 @click.option("--mono", type=click.Choice(["realistic", "warp"]), default="realistic", show_default=True,
               help="The held-out pairs' monocular input: realistic (the family training shows; --split's pairs) or "
                    "warp (another family: a smooth warp of the scene's mono-fooled disparity, blur, noise and an "
-                   "unknown affine, on seeds 300-303 of its own). Trained networks are reused: scoring warp after "
+                   "unknown affine, on seeds 22000-22099 of its own). Trained networks are reused: scoring warp after "
                    "val or test trains nothing.")
 @click.option("--workers", type=click.IntRange(1, 64), default=1, show_default=True,
               help="Trainings run side by side (each one process; give each a core: OMP_NUM_THREADS=1 on 2 cores).")
@@ -241,17 +242,17 @@ def fusion_benchmark(as_json: bool, seeds: int, steps: int | None, work_dir: Pat
 
     if mono == "warp" and split is not None:
         raise click.UsageError("--mono warp scores pairs of seeds of their own: --split is for the realistic mono's pairs")
-    if mono_only:
-        if ablations or workers > 1 or pretrained or scratch or settings:
-            raise click.UsageError("--ablations, --workers, --pretrained, --scratch and --set are about training, and "
-                                   "--mono-only trains nothing: pass one or the other")
-        _report(run_mono_bench(split=split, mono=mono), as_json)
-        return
     if pretrained and scratch:
         raise click.UsageError("--pretrained names a trunk to start from and --scratch starts from none: pass one")
     work_dir = work_dir.absolute()
     found = work_dir / TRUNK_FILE
     trunk = None if scratch else pretrained or (found if found.is_file() else None)
+    if mono_only:
+        if ablations or workers > 1 or settings:
+            raise click.UsageError("--ablations, --workers and --set are about training, and --mono-only trains "
+                                   "nothing: pass one or the other")
+        _report(run_mono_bench(split=split, mono=mono, work_dir=work_dir, pretrained=trunk), as_json)
+        return
     steps = steps or (DEFAULT_STEPS if trunk is None else FINETUNE_STEPS)
     results = run_fusion_bench(work_dir, seeds=seeds, steps=steps, ablations=ablations, split=split, mono=mono,
                                workers=workers, pretrained=trunk, overrides=settings)
@@ -318,6 +319,7 @@ def _print_fusion(results: dict[str, Any]) -> None:
         for method, figures in paired["against"].items():
             click.echo(f"  {method:16}" + "".join(
                 f"  {_figure(figures[r], key, signed=True) + ' [' + str(figures[r][key + '_lower']) + ']':>30}" for r in regions))
+    _print_intervals(results["intervals"], regions)
     trunk = results["pretrained"]
     if trunk is None:
         click.echo("pretrained: none (from scratch)")
@@ -325,6 +327,26 @@ def _print_fusion(results: dict[str, Any]) -> None:
         fresh = {name: len(init["fresh"]) for name, init in trunk["init"].items()}
         click.echo(f"pretrained: {trunk['file']} sha256 {trunk['sha256'][:16]}; tensors started fresh: {fresh}")
     click.echo(f"timings_s {results['timings_s']}")
+
+
+def _print_intervals(found: dict[str, Any], regions: list[str]) -> None:
+    """The decisions: each difference's 95 % interval over scenes and seeds, the oracle gate's headroom
+    and each gate's share of it."""
+    def cell(value: dict[str, float], signed: bool = True) -> str:
+        sign = "+" if signed else ""
+        return f"{value['value']:{sign}.3f} [{value['low']:{sign}.3f}, {value['high']:{sign}.3f}]"
+
+    click.echo(f"EPE px, {int(found['level'] * 100)} % intervals over {found['scenes']} scenes and {found['seeds']} "
+               "seed(s): fusion minus each method (lower / higher / undecided), each gate minus its own stereo branch")
+    rows = [(f"fusion - {m}", v) for m, v in found["against"].items()] + list(found["isolation"].items())
+    for name, figures in rows:
+        click.echo(f"  {name:30}" + "".join(f"  {cell(figures[r]['epe']) + ' ' + figures[r]['epe']['decided']:>36}"
+                                            for r in regions))
+    for title, block, signed in (("oracle gate's headroom, px (stereo minus oracle)", found["oracle"], False),
+                                 ("share of its stereo branch's oracle headroom each gate takes", found["capture"], True)):
+        click.echo(title)
+        for name, figures in block.items():
+            click.echo(f"  {name:30}" + "".join(f"  {cell(figures[r], signed):>36}" for r in regions))
 
 
 def _figure(figures: dict[str, float], key: str, *, signed: bool = False) -> str:
