@@ -8,7 +8,9 @@ captures into a workspace of their own (``<work dir>/pretrain/workspace``) and a
 run trains on them through the product's training job. The network trained is the no-VLM one, so that
 its mono context encoder learns from the mono input as the fusion networks' does; only its trunk
 (``benchmarks.trunk``) is kept, in ``<work dir>/pretrain/trunk.safetensors`` with
-``trunk.json`` (recipe and sha256) beside it, where ``bench fusion`` finds it.
+``trunk.json`` (recipe and sha256) beside it, where ``bench fusion`` finds it. The recipe holds what
+rebuilds the trunk (``benchmarks.provenance``): the resolved config it trained with, a hash of its
+data, the commit and a fingerprint of the sources that shape training.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from benchmarks import fusion
+from benchmarks import fusion, provenance
 from benchmarks.trunk import TRUNK_FILE, save_trunk
 from dataset.models import TrainingRun
 from dataset.synthetic.io import FORMAT as SYNTHETIC_FORMAT
@@ -60,6 +62,8 @@ def run_pretrain(work_dir: Path, *, videos: int = PRETRAIN_VIDEOS, frames: int =
     trunk's record (file, sha256, recipe), the conditions of the pre-training data beside the test
     pairs', and the timings (seconds)."""
     started = time.perf_counter()
+    # Taken before training, so that the record names the code the run started from.
+    source_commit, sources = provenance.source_commit(), provenance.training_sources_fingerprint()
     seeds = pretrain_seeds(videos)
     data = {"protocol": fusion.PROTOCOL, "seeds": [seeds[0], seeds[-1]], "frames": frames, "size": fusion.SIZE,
             "capture_baselines_m": fusion.TRAIN_BASELINE_M, "synthetic": SYNTHETIC_FORMAT}
@@ -67,7 +71,12 @@ def run_pretrain(work_dir: Path, *, videos: int = PRETRAIN_VIDEOS, frames: int =
     rt, conditions = fusion.bench_workspace(home, data)
     cached = conditions is not None
     if conditions is None:
-        conditions = fusion.finish_workspace(home, data, {"captures": fusion.import_captures(rt, seeds, frames)})
+        captures = fusion.import_captures(rt, seeds, frames)
+        # Hashed from the same renders the import made (rendering is deterministic), once per prepared
+        # workspace: a reused workspace keeps the hash of what it imported.
+        conditions = fusion.finish_workspace(home, data, {"captures": captures,
+                                                          "data_sha256": provenance.pretrain_data_digest(seeds, frames)})
+    data_sha256 = conditions.get("data_sha256") or provenance.pretrain_data_digest(seeds, frames)
     prepare_s = time.perf_counter() - started
     try:
         run_id = fusion.launch_run(rt, PRETRAIN_SEED, pretrain_overrides(steps), split=PRETRAIN_SPLIT)
@@ -79,7 +88,11 @@ def run_pretrain(work_dir: Path, *, videos: int = PRETRAIN_VIDEOS, frames: int =
         rt.close()
     recipe = {"preset": "lite", "overrides": pretrain_overrides(steps), "seed": PRETRAIN_SEED, "split": PRETRAIN_SPLIT,
               "data": data, "run": run_id, "best_step": best_step, "code_version": code_version(),
-              "command": f"illusion-studio bench pretrain --videos {videos} --frames {frames} --steps {steps}"}
+              "command": f"illusion-studio bench pretrain --videos {videos} --frames {frames} --steps {steps}",
+              # The command alone does not rebuild the trunk once the preset's defaults move on.
+              "resolved_config": provenance.resolved_config("lite", pretrain_overrides(steps)),
+              "data_sha256": data_sha256,
+              "provenance": {"commit": source_commit, "sources": sources}}
     record = save_trunk(checkpoint, work_dir / TRUNK_FILE, recipe)
     timed = time.perf_counter()
     held_out = fusion.condition_ranges(fusion.condition_values(fusion.held_out_samples(fusion.TEST_SEEDS)))
