@@ -211,6 +211,10 @@ def test_report_carries_every_method_the_paired_record_and_the_timings(tmp_path:
     assert report["pairs"]["split"] == "val" and report["pairs"]["seeds"] == list(fusion.VAL_SEEDS)
     assert report["pairs"]["baseline_m"] == 0.63 and report["protocol"] == 3
     assert report["networks"]["stereo_only"]["overrides"] == {"model.use_vlm": False, "model.use_mono": False}
+    provenance = report["provenance"]
+    assert len(provenance["commit"]["commit"]) == 40 and len(provenance["sources"]["sha256"]) == 64
+    assert set(provenance["resolved_configs"]) == {"fusion", "no_vlm", "stereo_only", "trunk_0"}
+    assert provenance["resolved_configs"]["stereo_only"]["model"]["use_mono"] is False
     assert report["networks"]["trunk_0"]["trained"] is False and report["networks"]["fusion"]["trained"] is True
     # the per-frame record: every frame and region, each seed's row (the baselines: one), and the gates' sums
     frames = report["per_frame"]

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -42,11 +43,11 @@ def test_held_out_pairs_are_bit_identical_whatever_the_training_workspace_holds(
     """Two workspaces with other training data (disparity range, conditions): the same pairs, scored
     alike, at the frozen baseline; their hash is the one of the pairs rendered on their own."""
     scored: list[str] = []
-    score = fusion._score
+    score = fusion.score_frames
 
-    def recording(pairs: list[Any], methods: dict[str, Any]) -> Any:
+    def recording(pairs: list[Any], methods: dict[str, Any], **kw: Any) -> Any:
         scored.append(fusion.pairs_digest(pairs))
-        return score(pairs, methods)
+        return score(pairs, methods, **kw)
 
     one_frame = fusion.held_out_samples
     monkeypatch.setattr(fusion, "held_out_samples", lambda seeds, mono: one_frame(seeds[:2], frames=1, mono=mono))
@@ -54,7 +55,7 @@ def test_held_out_pairs_are_bit_identical_whatever_the_training_workspace_holds(
     monkeypatch.setattr(fusion, "launch_run", lambda *_a, **_k: 1)
     monkeypatch.setattr(fusion, "finished_run", lambda *_a: None)  # both workspaces train their own
     monkeypatch.setattr(fusion, "run_jobs", lambda _rt, workers, runs: None)
-    monkeypatch.setattr(fusion, "_score", recording)
+    monkeypatch.setattr(fusion, "score_frames", recording)
     monkeypatch.setattr(fusion, "_seed_scores", _trained)
     reports = []
     for train_range, fooling in (([3.0, 44.0], 2.1), ([10.0, 90.0], 30.0)):
@@ -71,11 +72,13 @@ def test_held_out_pairs_are_bit_identical_whatever_the_training_workspace_holds(
     assert reports[0]["paired"]["against"]["sgbm"]["all"]["epe_spread"] == pytest.approx(0.5)
 
 
-def _trained(_rt: Any, k: int, _pairs: Any, _networks: Any, launched: Any) -> dict[str, Any]:
+def _trained(_rt: Any, k: int, pairs: Any, _networks: Any, launched: Any, _inits: Any) -> dict[str, Any]:
     """Benchmark seed ``k``'s fusion network scored without a network: its figures depend on ``k`` alone."""
-    figures = {"fusion": {r: {"epe": 1.0 + k, "bad2": 10.0} for r in fusion.REGIONS}}
-    return {"methods": figures, "runs": {"fusion": launched[k, "fusion"]}, "train_s": {"fusion": 1.0},
-            "score_s": {"fusion": 1.0}}
+    frames = len(pairs)
+    figures = {"fusion": {r: {"epe": [1.0 + k] * frames, "bad2": [10.0] * frames} for r in fusion.REGIONS}}
+    scores = fusion.FrameScores(figures, {r: [1] * frames for r in fusion.REGIONS}, {}, {"fusion": 1.0})
+    return {"scores": scores, "methods": scores.means(), "runs": {"fusion": launched[k, "fusion"]},
+            "train_s": {"fusion": 1.0}, "score_s": {"fusion": 1.0}}
 
 
 def test_warp_pairs_are_the_held_out_render_with_the_warp_mono() -> None:
@@ -100,7 +103,7 @@ def test_warp_pairs_are_the_held_out_render_with_the_warp_mono() -> None:
 def test_warp_seeds_are_held_out_from_training_validation_test_and_pretraining() -> None:
     warp = set(fusion.CORRUPTION_SEEDS)
     others = {*range(fusion.GENERATED_VIDEOS), *fusion.RENDERED_SEEDS, *fusion.TEST_SEEDS, *fusion.VAL_SEEDS}
-    assert len(warp) == 4 and not warp & others
+    assert len(warp) == 100 and not warp & others
     assert warp <= pretrain.benchmark_seeds() and not warp & set(pretrain.pretrain_seeds(50_000))
 
 
@@ -238,8 +241,8 @@ def test_pretraining_seeds_never_touch_the_benchmark_seeds(monkeypatch: pytest.M
     assert not benchmark.intersection(seeds) and min(seeds) > max(benchmark)
     # the generated samples' mono estimators come from a seed range of their own too
     assert max(seeds) < fusion.GENERATED_MONO_SEED
-    monkeypatch.setattr(pretrain, "PRETRAIN_FIRST_SEED", 98)
-    with pytest.raises(ValueError, match="benchmark's seed 100"):
+    monkeypatch.setattr(pretrain, "PRETRAIN_FIRST_SEED", 998)
+    with pytest.raises(ValueError, match="benchmark's seed 1000"):
         pretrain.pretrain_seeds(5)
     overrides = pretrain.pretrain_overrides(30)
     assert overrides["train.steps"] == 30 and overrides["model.use_vlm"] is False
@@ -314,6 +317,15 @@ def test_cli_pretrain_passes_its_options_and_prints_the_conditions(tmp_path: Pat
                          "frames": pretrain.PRETRAIN_FRAMES, "steps": pretrain.PRETRAIN_STEPS}
 
 
+def _intervals() -> dict[str, Any]:
+    """The intervals of a record of two scenes of two frames: fusion 1 px worse than stereo_only everywhere."""
+    pairs = [SimpleNamespace(name=f"s{scene}/{frame}", meta={"seed": scene}) for scene in (0, 1) for frame in (0, 1)]
+    figures = {m: {r: {"epe": [epe] * 4, "bad2": [10.0] * 4} for r in fusion.REGIONS}
+               for m, epe in (("fusion", 3.0), ("stereo_only", 2.0))}
+    scores = fusion.FrameScores(figures, {r: [100] * 4 for r in fusion.REGIONS}, {}, {})
+    return fusion.intervals(fusion.held_out_record(pairs, [scores], scores), "fusion")
+
+
 def test_cli_fusion_prints_the_conditions_the_figures_and_the_paired_record(tmp_path: Path,
                                                                             monkeypatch: pytest.MonkeyPatch) -> None:
     ranges = {"mirror_fooling_px": {"frames": 36, "min": 5.96, "median": 16.5, "max": 19.9},
@@ -326,7 +338,8 @@ def test_cli_fusion_prints_the_conditions_the_figures_and_the_paired_record(tmp_
                "conditions": {"training": {"captures": ranges, "generated": {**ranges, "mirror_fooling_px": {"frames": 0}}},
                               "held_out": ranges},
                "seeds": 2, "train_seeds": [0, 48], "split_seed": 0, "methods": fusion._aggregate(per_seed),
-               "paired": fusion.paired_differences(per_seed, "fusion"), "pretrained": None, "timings_s": {"total": 1.0}}
+               "paired": fusion.paired_differences(per_seed, "fusion"), "pretrained": None, "timings_s": {"total": 1.0},
+               "intervals": _intervals()}
     monkeypatch.setattr(fusion, "run_fusion_bench", lambda work_dir, **kw: results)
     out = CliRunner().invoke(main, ["bench", "fusion", "--work-dir", str(tmp_path)])
     assert out.exit_code == 0, out.output
@@ -338,6 +351,10 @@ def test_cli_fusion_prints_the_conditions_the_figures_and_the_paired_record(tmp_
     assert any(line.split()[:1] == ["stereo_only"] and "+0.00 ± 0.50 [1]" in line for line in lines)  # EPE: -0.5, +0.5
     assert any(line.split()[:1] == ["stereo_only"] and "+10.00 ± 0.00 [0]" in line for line in lines)  # bad-2
     assert "from scratch" in out.output
+    # the intervals over scenes: fusion is 1 px worse than stereo_only in every frame, so that is decided
+    assert any(line.split()[:3] == ["fusion", "-", "stereo_only"] and "+1.000 [+1.000, +1.000] higher" in line
+               for line in lines)
+    assert "oracle gate's headroom" in out.output
     assert lines[0].startswith("held-out pairs: test, mono realistic, seeds 100-103")
     results["pairs"] = {**results["pairs"], "split": None, "mono": "warp", "seeds": [300, 303]}
     out = CliRunner().invoke(main, ["bench", "fusion", "--mono", "warp", "--work-dir", str(tmp_path)])

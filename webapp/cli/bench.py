@@ -218,7 +218,7 @@ def _lite_overrides(ctx: click.Context, param: click.Parameter, values: tuple[st
 @click.option("--mono", type=click.Choice(["realistic", "warp"]), default="realistic", show_default=True,
               help="The held-out pairs' monocular input: realistic (the family training shows; --split's pairs) or "
                    "warp (another family: a smooth warp of the scene's mono-fooled disparity, blur, noise and an "
-                   "unknown affine, on seeds 22000-22099 of its own). Trained networks are reused: scoring warp after "
+                   "unknown affine, on seeds 3000-3099 of its own). Trained networks are reused: scoring warp after "
                    "val or test trains nothing.")
 @click.option("--workers", type=click.IntRange(1, 64), default=1, show_default=True,
               help="Trainings run side by side (each one process; give each a core: OMP_NUM_THREADS=1 on 2 cores).")
