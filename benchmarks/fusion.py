@@ -93,10 +93,15 @@ PROTOCOL = 3
 SIZE = (320, 192)  # W x H of every rendered frame
 FRAMES = 6  # per video
 GENERATED_VIDEOS = 6  # seeds 0..5 through the pipeline
-RENDERED_SEEDS = tuple(range(40, 46))  # imported as captures
+# Imported as captures: enough scenes that their mirrors fool stereo as much as the held-out ones do.
+RENDERED_SEEDS = tuple(range(40, 64))
 TEST_SEEDS = tuple(range(1_000, 1_100))  # held out: never in training or validation; scored once, at the end
 VAL_SEEDS = tuple(range(2_000, 2_100))  # held out as well, rendered alike: the model's decisions are made on these
 HELD_OUT_FRAMES = 2  # per held-out scene: frames of one scene are alike, so scenes rather than frames
+# Every scene of protocol 3 (training, pre-training, held out) is of the scene families
+# (dataset.synthetic.layout): frames of one distribution for every kind, large mirrors, textureless and
+# repetitive walls, estimators that read a mirror as a surface beside ones it fools.
+SCENE_FAMILIES = True
 SPLITS: dict[str, tuple[int, ...]] = {"test": TEST_SEEDS, "val": VAL_SEEDS}  # the realistic mono's held-out pairs
 CORRUPTION_SEEDS = tuple(range(3_000, 3_100))  # held out as well, rendered alike: the warp mono's pairs, no split
 MONO_FAMILIES = ("realistic", "warp")  # the held-out pairs' monocular input: the training estimator's family, or not
@@ -269,7 +274,8 @@ def held_out_samples(seeds: Iterable[int], frames: int = HELD_OUT_FRAMES, *, mon
     """The held-out rendered pairs: ``frames`` of each seed, at SIZE and HELD_OUT_BASELINE_M, with the
     monocular input ``mono`` (see :func:`video_samples`). Nothing of the training data enters them."""
     return [sample for seed in seeds
-            for sample in video_samples(render_video(seed, frames, *SIZE, baseline_m=HELD_OUT_BASELINE_M), mono)]
+            for sample in video_samples(render_video(seed, frames, *SIZE, baseline_m=HELD_OUT_BASELINE_M,
+                                                     families=SCENE_FAMILIES), mono)]
 
 
 def video_samples(video: SyntheticVideo, mono: str = "realistic") -> list[StereoSample]:
@@ -301,6 +307,12 @@ def pairs_digest(samples: Iterable[StereoSample]) -> str:
         for array in (sample.left, sample.right, sample.disparity, sample.mono):
             digest.update(np.ascontiguousarray(array).tobytes())
     return digest.hexdigest()
+
+
+def capture_video(seed: int, frames: int, families: bool = SCENE_FAMILIES) -> SyntheticVideo:
+    """Capture video ``seed`` as the benchmark (and its pre-training) imports it: ``frames`` frames at SIZE
+    and its :func:`capture_baseline`."""
+    return render_video(seed, frames, *SIZE, baseline_m=capture_baseline(seed), families=families)
 
 
 def capture_baseline(seed: int) -> float:
@@ -341,7 +353,7 @@ def redrawn_mono(disparity: np.ndarray, source: np.ndarray, scale: float, masks:
     shape = disparity.shape
     picture, mirror = (np.asarray(masks.get(kind, np.zeros(shape, bool)), bool) for kind in ("picture", "mirror"))
     model_seed = GENERATED_MONO_SEED + seed
-    mono, _affine = realistic_mono(sample_mono_model(model_seed), model_seed, index, _positive(disparity),
+    mono, _affine = realistic_mono(sample_mono_model(model_seed, SCENE_FAMILIES), model_seed, index, _positive(disparity),
                                    _positive(scale * np.asarray(source, np.float64)), picture, mirror)
     return mono
 
@@ -407,12 +419,12 @@ def prepared_workspace(home: Path) -> tuple[Runtime, bool, dict[str, Any]]:
     generated samples and captures show (:func:`condition_ranges`). Built once."""
     recipe = {"protocol": PROTOCOL, "size": SIZE, "frames": FRAMES, "generated": GENERATED_VIDEOS,
               "rendered": RENDERED_SEEDS, "synthetic": SYNTHETIC_FORMAT, "capture_baselines_m": TRAIN_BASELINE_M,
-              "generated_mono_seed": GENERATED_MONO_SEED}
+              "generated_mono_seed": GENERATED_MONO_SEED, "families": SCENE_FAMILIES}
     rt, conditions = bench_workspace(home, recipe)
     if conditions is not None:
         return rt, True, conditions
     videos = write_synthetic_dataset(home / "synthetic", videos=GENERATED_VIDEOS, seed=0, n_frames=FRAMES,
-                                     width=SIZE[0], height=SIZE[1])
+                                     width=SIZE[0], height=SIZE[1], families=SCENE_FAMILIES)
     with transaction(rt.sessions) as s:
         for path in videos:
             rt.submit(s, "ingest", ingest_params(str(path), dedup_hamming=None, prefilter=True), None)
@@ -441,7 +453,7 @@ def import_captures(rt: Runtime, seeds: Iterable[int], frames: int) -> dict[str,
     accept them (one transaction per video); the conditions they show (:func:`condition_ranges`)."""
     values: dict[str, list[float]] = {"mirror_fooling_px": [], "aligned_mono_epe_px": []}
     for seed in seeds:
-        video = render_video(seed, frames, *SIZE, baseline_m=capture_baseline(seed))
+        video = capture_video(seed, frames)
         with transaction(rt.sessions) as s:
             curator = s.scalar(select(User).where(User.name == "bench-curator"))
             for sample_id in import_rendered_video(s, rt.media, video):

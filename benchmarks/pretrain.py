@@ -66,7 +66,8 @@ def run_pretrain(work_dir: Path, *, videos: int = PRETRAIN_VIDEOS, frames: int =
     source_commit, sources = provenance.source_commit(), provenance.training_sources_fingerprint()
     seeds = pretrain_seeds(videos)
     data = {"protocol": fusion.PROTOCOL, "seeds": [seeds[0], seeds[-1]], "frames": frames, "size": fusion.SIZE,
-            "capture_baselines_m": fusion.TRAIN_BASELINE_M, "synthetic": SYNTHETIC_FORMAT}
+            "capture_baselines_m": fusion.TRAIN_BASELINE_M, "synthetic": SYNTHETIC_FORMAT,
+            "families": fusion.SCENE_FAMILIES}
     home = work_dir / "pretrain" / "workspace"
     rt, conditions = fusion.bench_workspace(home, data)
     cached = conditions is not None

@@ -86,7 +86,8 @@ def test_warp_pairs_are_the_held_out_render_with_the_warp_mono() -> None:
     replaced by the frame's warped_mono of its mono-fooled disparity."""
     seed = fusion.CORRUPTION_SEEDS[0]
     (realistic,), (warp,) = (fusion.held_out_samples((seed,), frames=1, mono=mono) for mono in fusion.MONO_FAMILIES)
-    frame = render_video(seed, 1, *fusion.SIZE, baseline_m=fusion.HELD_OUT_BASELINE_M).frames[0]
+    frame = render_video(seed, 1, *fusion.SIZE, baseline_m=fusion.HELD_OUT_BASELINE_M,
+                         families=fusion.SCENE_FAMILIES).frames[0]
     assert warp.name == realistic.name and warp.meta == realistic.meta and set(warp.regions) == set(realistic.regions)
     assert all(np.array_equal(getattr(warp, k), getattr(realistic, k)) for k in ("left", "right", "disparity"))
     assert all(np.array_equal(warp.regions[r], realistic.regions[r]) for r in warp.regions)
@@ -190,14 +191,14 @@ def test_condition_ranges_summarise_frames() -> None:
 
 
 def test_capture_baselines_cover_the_held_out_pairs() -> None:
-    """One frame of each capture seed at its drawn baseline against one of each test seed at 0.63 m: the
-    captures' disparities (1st-99th percentile) and mirror fooling span the test pairs'."""
+    """One frame of each capture seed at its drawn baseline against one of 30 test seeds at 0.63 m: the
+    captures' disparities (1st-99th percentile) span the test pairs', and their mirror fooling spans the
+    test pairs' but for the 5 % at either end."""
     baselines = [fusion.capture_baseline(seed) for seed in fusion.RENDERED_SEEDS]
     assert all(fusion.TRAIN_BASELINE_M[0] <= b <= fusion.TRAIN_BASELINE_M[1] for b in baselines)
     assert len(set(baselines)) == len(baselines) and baselines == [fusion.capture_baseline(s) for s in fusion.RENDERED_SEEDS]
-    captures = [s for seed, b in zip(fusion.RENDERED_SEEDS, baselines, strict=True)
-                for s in fusion.video_samples(render_video(seed, 1, *fusion.SIZE, baseline_m=b))]
-    tests = fusion.held_out_samples(fusion.TEST_SEEDS, frames=1)
+    captures = [s for seed in fusion.RENDERED_SEEDS for s in fusion.video_samples(fusion.capture_video(seed, 1))]
+    tests = fusion.held_out_samples(fusion.TEST_SEEDS[:30], frames=1)
 
     def span(samples: list[Any]) -> tuple[float, float]:
         return (min(np.nanpercentile(s.disparity, 1) for s in samples), max(np.nanpercentile(s.disparity, 99) for s in samples))
@@ -206,7 +207,7 @@ def test_capture_baselines_cover_the_held_out_pairs() -> None:
     assert train_lo <= test_lo and test_hi <= train_hi, (train_lo, train_hi, test_lo, test_hi)
     train_fooling = fusion.condition_values(captures)["mirror_fooling_px"]
     test_fooling = fusion.condition_values(tests)["mirror_fooling_px"]
-    assert min(train_fooling) <= min(test_fooling) and max(test_fooling) <= max(train_fooling)
+    assert min(train_fooling) <= np.percentile(test_fooling, 5) and np.percentile(test_fooling, 95) <= max(train_fooling)
     assert min(test_fooling) > 5  # at 0.63 m a mirror fools stereo by several pixels
 
 

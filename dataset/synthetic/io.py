@@ -117,6 +117,7 @@ def write_video(video: SyntheticVideo, out_dir: Path, defects: dict[int, str] | 
         "pairs": [{"pair": r.pair, "kind": r.kind, "illusion_type": r.illusion_type}
                   for r in video.frames[0].regions],
         "mono": video.mono.as_dict(),
+        "families": video.families,
         "frames": [{"index": f.index, "time_s": f.time_s, "mono_scale": f.mono_affine.scale,
                     "mono_shift": f.mono_affine.shift,
                     **({"defect": defects[f.index]} if f.index in (defects or {}) else {})} for f in video.frames],
@@ -157,17 +158,20 @@ def read_video(video_dir: Path) -> SyntheticVideo:
     k = scene["intrinsics"]
     return SyntheticVideo(name=scene["name"], seed=scene["seed"], fps=scene["fps"], fx=k["fx"],
                           fy=k["fy"], cx=k["cx"], cy=k["cy"], baseline_m=scene["baseline_m"],
-                          frames=frames, mono=MonoModel.from_dict(scene["mono"]))
+                          frames=frames, mono=MonoModel.from_dict(scene["mono"]),
+                          families=bool(scene.get("families", False)))
 
 
 def write_synthetic_dataset(out_dir: Path, videos: int = 3, seed: int = 0, n_frames: int = 12,
-                            width: int = 640, height: int = 360, *, defects: bool = False) -> list[Path]:
-    """Render and write ``videos`` videos (video k from seed ``seed + k``); their folders.
-    ``defects``: add DEFECT_FRAMES spoilt frames (a caption, a blur) to each video's ``n_frames``
-    clean ones, for the prefilter to catch."""
+                            width: int = 640, height: int = 360, *, defects: bool = False,
+                            families: bool = False) -> list[Path]:
+    """Render and write ``videos`` videos (video k from seed ``seed + k``, with the scene ``families``
+    or not); their folders. ``defects``: add DEFECT_FRAMES spoilt frames (a caption, a blur) to each
+    video's ``n_frames`` clean ones, for the prefilter to catch."""
     paths = []
     for k in range(videos):
-        video, spoilt = render_video(seed + k, n_frames + (DEFECT_FRAMES if defects else 0), width, height), {}
+        video, spoilt = render_video(seed + k, n_frames + (DEFECT_FRAMES if defects else 0), width, height,
+                                     families=families), {}
         if defects:
             video, spoilt = spoil_last_frames(video)
         paths.append(write_video(video, out_dir, spoilt))

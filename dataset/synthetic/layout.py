@@ -64,6 +64,24 @@ _CEILING_TINT = (0.98, 0.98, 0.96)
 _PICTURE_FRAME_TINT = (0.50, 0.34, 0.16)
 _MIRROR_FRAME_TINT = (0.22, 0.22, 0.25)
 
+# Scene families (``families=True``): scenes where each of stereo and the monocular map is the one to trust
+# somewhere inside illusions. Their numbers come from a stream of their own, so that a family scene is the
+# seed's room with these drawn on top.
+_FAMILY_STREAM = 0x66616D  # "fam"
+# Every illusion's frame, whatever its kind, from one distribution: so a frame says nothing of the kind.
+FRAME_PRESENT = 0.6
+FRAME_WIDTH_M = (0.02, 0.12)
+FRAME_TINTS = (_PICTURE_FRAME_TINT, _MIRROR_FRAME_TINT, (0.92, 0.92, 0.90), (0.08, 0.08, 0.08),
+               (0.75, 0.62, 0.25), (0.55, 0.55, 0.58), (0.35, 0.22, 0.12))
+# Mirrors too wide for a matcher to fill from their border: tried for 80 % of scenes, of which about 60 %
+# find a wall that holds one whole in view (about half the mirrors are large).
+LARGE_MIRROR = 0.8
+LARGE_MIRROR_M = ((1.4, 2.4), (1.1, 1.6))  # width, height ranges
+# Walls where stereo is weak: textureless (flat paint) or repetitive (a small tile, repeated often).
+TEXTURELESS_WALL = 0.3
+REPETITIVE_WALL = 0.2
+REPETITIVE_REPEAT = (5.0, 8.0)  # tiles per metre: a period of 12-20 cm, some disparity steps at 0.6 m
+
 
 @dataclass(frozen=True)
 class Trajectory:
@@ -234,8 +252,9 @@ def _apart(lo: Vec3, hi: Vec3, boxes: list[tuple[Vec3, Vec3]], gap: float = 0.15
 
 
 def _room_materials(rng: np.random.Generator, boxes: list[tuple[Vec3, Vec3]],
-                    wall_textures: tuple[str, ...]) -> list[Material]:
-    """Materials for the six faces (walls tinted, floor, ceiling) and the boxes' faces."""
+                    wall_textures: tuple[str, ...], family: np.random.Generator | None = None) -> list[Material]:
+    """Materials for the six faces (walls tinted, floor, ceiling) and the boxes' faces; with ``family``
+    (scene families) a wall may be textureless or repetitive instead."""
     materials = []
     tints = rng.permutation(len(_WALL_TINTS))
     for face in range(N_FACES):
@@ -247,6 +266,12 @@ def _room_materials(rng: np.random.Generator, boxes: list[tuple[Vec3, Vec3]],
         else:
             name, tint = str(rng.choice(wall_textures)), _WALL_TINTS[tints[face]]
             repeat = rng.uniform(1.3, 2.2)
+            if family is not None:
+                draw = family.random()
+                if draw < TEXTURELESS_WALL:
+                    name = FLAT
+                elif draw < TEXTURELESS_WALL + REPETITIVE_WALL:
+                    name, repeat = "brick", family.uniform(*REPETITIVE_REPEAT)
         materials.append(Material(texture_index(name), True, (1 / repeat, 0.0),
                                   (1 / repeat, 0.0), tint))
     photos = rng.permutation(len(PHOTO_TEXTURES))
@@ -316,17 +341,28 @@ def _depicted_scene(rng: np.random.Generator, room_lo: Vec3, room_hi: Vec3, pict
     return Scene(_vec3(lo), _vec3(hi), tuple(boxes), (), tuple(materials), _vec3(light))
 
 
-def sample_layout(seed: int) -> Layout:
-    """The layout for ``seed`` (deterministic)."""
+def sample_layout(seed: int, families: bool = False) -> Layout:
+    """The layout for ``seed`` (deterministic); ``families``: with the scene families' frames, mirror
+    sizes and walls (module constants FRAME_*, LARGE_MIRROR*, *_WALL)."""
     rng = np.random.default_rng(seed)
+    family = np.random.default_rng([_FAMILY_STREAM, seed]) if families else None
     for _ in range(_ROOM_TRIES):
-        layout = _try_layout(rng)
+        layout = _try_layout(rng, family)
         if layout is not None:
             return layout
     raise RuntimeError(f"seed {seed}: no room with fully visible illusions; bounds are wrong")
 
 
-def _try_layout(rng: np.random.Generator) -> Layout | None:
+def _frame(family: np.random.Generator | None, tint: tuple[float, float, float]) -> tuple[float, tuple[float, ...]]:
+    """(width m, tint) of an illusion's frame: FRAME_M and ``tint`` without families, else from the one
+    distribution every kind shares (width 0: no frame)."""
+    if family is None:
+        return FRAME_M, tint
+    width = family.uniform(*FRAME_WIDTH_M) if family.random() < FRAME_PRESENT else 0.0
+    return width, FRAME_TINTS[int(family.integers(len(FRAME_TINTS)))]
+
+
+def _try_layout(rng: np.random.Generator, family: np.random.Generator | None = None) -> Layout | None:
     """A random layout, or None when the drawn room leaves no visible place for an illusion."""
     eye = rng.uniform(1.45, 1.65)
     room_lo = (-rng.uniform(2.0, 3.0), eye - rng.uniform(2.6, 3.0), -rng.uniform(0.8, 1.4))
@@ -342,7 +378,11 @@ def _try_layout(rng: np.random.Generator) -> Layout | None:
     picture = _place_illusion(rng, room_lo, room_hi, trajectory, (1.0, 1.8), (0.7, 1.1), None)
     if picture is None:
         return None
-    mirror = _place_illusion(rng, room_lo, room_hi, trajectory, (0.8, 1.4), (0.8, 1.1), picture)
+    mirror = None
+    if family is not None and family.random() < LARGE_MIRROR:
+        mirror = _place_illusion(rng, room_lo, room_hi, trajectory, *LARGE_MIRROR_M, picture)
+    if mirror is None:  # (a large one may find no wall it fits whole in view: then a usual one)
+        mirror = _place_illusion(rng, room_lo, room_hi, trajectory, (0.8, 1.4), (0.8, 1.1), picture)
     if mirror is None:
         return None
     # Boxes stand where the camera sees their base (the floor enters the view ~3.5 m ahead).
@@ -350,16 +390,19 @@ def _try_layout(rng: np.random.Generator) -> Layout | None:
     region_hi = (room_hi[0] - 0.2, room_hi[2] - 0.4)
     boxes = _sample_boxes(rng, int(rng.integers(2, 4)), region_lo, region_hi, room_hi[1],
                           (0.4, 0.9), (0.35, MAX_BOX_HEIGHT_M), cone=0.45)
-    materials = _room_materials(rng, boxes, _WALL_TEXTURES)
+    materials = _room_materials(rng, boxes, _WALL_TEXTURES, family)
     flat = texture_index(FLAT)
+    (picture_frame_m, picture_tint), (mirror_frame_m, mirror_tint) = (_frame(family, _PICTURE_FRAME_TINT),
+                                                                      _frame(family, _MIRROR_FRAME_TINT))
     materials += [
-        Material(flat, False, (0.0, 0.5), (0.0, 0.5), _PICTURE_FRAME_TINT),
-        Material(flat, False, (0.0, 0.5), (0.0, 0.5), _MIRROR_FRAME_TINT),
+        Material(flat, False, (0.0, 0.5), (0.0, 0.5), picture_tint),
+        Material(flat, False, (0.0, 0.5), (0.0, 0.5), mirror_tint),
         _rect_material(picture, PICTURE_TILE),
         Material(flat, False, (0.0, 0.5), (0.0, 0.5)),
     ]
     light = (rng.uniform(-0.5, 0.5), room_lo[1] + 0.7, rng.uniform(1.5, 3.5))
-    rects = (picture.grown(FRAME_M), mirror.grown(FRAME_M), picture, mirror)
+    # A frame of width 0 is the canvas's own rect, which the canvas (a later rect) paints over: no frame.
+    rects = (picture.grown(picture_frame_m), mirror.grown(mirror_frame_m), picture, mirror)
     scene = Scene(room_lo, room_hi, tuple(boxes), rects, tuple(materials), light,
                   mirror=N_FACES + 3 * len(boxes) + 3)
     # The picture is painted for an eye at the camera's mean position, level with the

@@ -31,6 +31,10 @@ import numpy as np
 _STREAM = 0x6D6F6E6F  # "mono": this model's random numbers never shift the layout's
 _WAVES = 6
 MIRROR_FRACTION = (0.6, 0.9)
+# Scene families: half the estimators read a mirror as the surface it is (the glass: stereo is the one
+# fooled there), half are fooled by it as MIRROR_FRACTION's are.
+MIRROR_FRACTION_FAMILIES = ((0.0, 0.3), (0.6, 0.9))
+_FAMILY_STREAM = 0x66616D  # "fam"
 # Calibrated once on the fusion benchmark's test pairs (`illusion-studio bench fusion --mono-only`):
 # mono-gt-align's non-illusion bad-2 lands near Depth Anything V2's 47 % on Booster.
 LAYOUT_STRENGTH = (0.07, 0.12)  # std of the log-depth field
@@ -72,8 +76,9 @@ class FrameAffine:
     shift: float
 
 
-def sample_mono_model(seed: int) -> MonoModel:
-    """The estimator of video ``seed``; deterministic."""
+def sample_mono_model(seed: int, families: bool = False) -> MonoModel:
+    """The estimator of video ``seed``; deterministic. ``families``: its mirror fraction drawn from
+    MIRROR_FRACTION_FAMILIES (a mirror the estimator reads as a surface, or one that fools it)."""
     rng = np.random.default_rng([_STREAM, seed])
     strength = float(rng.uniform(*LAYOUT_STRENGTH))
     amplitude = strength * np.sqrt(2 / _WAVES)  # K cosines of amplitude a have variance K a² / 2
@@ -82,7 +87,11 @@ def sample_mono_model(seed: int) -> MonoModel:
         cycles, angle = rng.uniform(*WAVE_CYCLES), rng.uniform(0, 2 * np.pi)
         waves.append((float(cycles * np.cos(angle)), float(cycles * np.sin(angle)),
                       float(rng.uniform(0, 2 * np.pi)), float(amplitude)))
-    return MonoModel(mirror_fraction=float(rng.uniform(*MIRROR_FRACTION)), layout_strength=strength,
+    fraction = float(rng.uniform(*MIRROR_FRACTION))
+    if families:  # from a stream of its own: the rest of the estimator is the seed's
+        family = np.random.default_rng([_STREAM, _FAMILY_STREAM, seed])
+        fraction = float(family.uniform(*MIRROR_FRACTION_FAMILIES[int(family.integers(2))]))
+    return MonoModel(mirror_fraction=fraction, layout_strength=strength,
                      depth_gamma=float(rng.uniform(*DEPTH_GAMMA)), edge_blur=float(rng.uniform(*EDGE_BLUR)),
                      thin_size=float(rng.uniform(*THIN_SIZE)), waves=tuple(waves))
 

@@ -64,7 +64,8 @@ class SyntheticFrame:
 class SyntheticVideo:
     """A rendered synthetic video: pinhole intrinsics ``fx``, ``fy``, ``cx``, ``cy`` (pixels,
     pixel centres at integer coordinates), stereo ``baseline_m`` (m), frame rate ``fps``, and the
-    monocular estimator ``mono`` its frames' ``mono_disparity`` came from."""
+    monocular estimator ``mono`` its frames' ``mono_disparity`` came from; ``families``: rendered
+    with the scene families (``dataset.synthetic.layout``)."""
 
     name: str
     seed: int
@@ -76,6 +77,7 @@ class SyntheticVideo:
     baseline_m: float
     frames: list[SyntheticFrame]
     mono: MonoModel
+    families: bool = False
 
     @property
     def width(self) -> int:

@@ -125,11 +125,12 @@ def intrinsics(width: int, height: int) -> tuple[float, float, float]:
 
 
 def render_video(seed: int, n_frames: int = 12, width: int = 640,
-                 height: int = 360, baseline_m: float = BASELINE_M) -> SyntheticVideo:
+                 height: int = 360, baseline_m: float = BASELINE_M, *, families: bool = False) -> SyntheticVideo:
     """Render ``n_frames`` frames (at FPS) of the synthetic room for ``seed``; deterministic.
 
-    Pair 0 is the picture, pair 1 the mirror. The scene depends on ``seed`` only; the size
-    only scales the view (see :func:`intrinsics`); ``baseline_m`` (metres) scales every
+    Pair 0 is the picture, pair 1 the mirror. The scene depends on ``seed`` (and ``families``: the scene
+    families' frames, mirror sizes, walls and mirror-reading estimators, named ``synthetic-families-…``)
+    only; the size only scales the view (see :func:`intrinsics`); ``baseline_m`` (metres) scales every
     disparity, e.g. to bring a test set into a model's training range.
     """
     if not baseline_m > 0:
@@ -137,8 +138,8 @@ def render_video(seed: int, n_frames: int = 12, width: int = 640,
     if n_frames < 1 or width < 16 or height < 16:
         raise ValueError(f"need n_frames >= 1 and a size of at least 16x16, got "
                          f"{n_frames} frames of {width}x{height}")
-    layout = sample_layout(seed)
-    mono_model = sample_mono_model(seed)
+    layout = sample_layout(seed, families)
+    mono_model = sample_mono_model(seed, families)
     atlas = build_atlas((render_picture(layout),))
     f, cx, cy = intrinsics(width, height)
     frames = []
@@ -163,5 +164,6 @@ def render_video(seed: int, n_frames: int = 12, width: int = 640,
             stereo_disparity=stereo,
             regions=regions,
         ))
-    return SyntheticVideo(name=f"synthetic-{seed:04d}", seed=seed, fps=FPS, fx=f, fy=f, cx=cx,
-                          cy=cy, baseline_m=baseline_m, frames=frames, mono=mono_model)
+    name = f"synthetic-families-{seed:04d}" if families else f"synthetic-{seed:04d}"
+    return SyntheticVideo(name=name, seed=seed, fps=FPS, fx=f, fy=f, cx=cx, cy=cy, baseline_m=baseline_m,
+                          frames=frames, mono=mono_model, families=families)
