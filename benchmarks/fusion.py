@@ -528,7 +528,7 @@ def run_mono_bench(*, split: str | None = None, mono: str = "realistic", work_di
     methods = build_methods(["mono_gt_align", *BASELINES[1:]], checkpoint=None, predictions=None, mono_dir=None)
     trunk = load_trunk(pretrained) if pretrained is not None else None
     if trunk is not None:
-        config = load_preset("lite", network_overrides(TRUNK_AT_0, FINETUNE_STEPS))
+        config = load_preset("lite", network_overrides(trunk_network(trunk), FINETUNE_STEPS))
         init = (work_dir or Path(".")) / "inits" / f"trunk_0-{trunk.sha256[:12]}.pt"
         compose_init(trunk, config, SPLIT_SEED, init)
         methods["trunk_0_stereo"] = build_methods(["stereo"], checkpoint=init, predictions=None, mono_dir=None)["stereo"]
@@ -545,6 +545,14 @@ def run_mono_bench(*, split: str | None = None, mono: str = "realistic", work_di
             "pretrained": None if trunk is None else {"file": trunk.name, "sha256": trunk.sha256},
             "conditions": {"held_out": condition_ranges(condition_values(pairs))},
             "seconds": round(time.perf_counter() - started, 1)}
+
+
+def trunk_network(trunk: Trunk) -> Network:
+    """The network a trunk is scored as at 0 steps: the stereo-only one for a trunk pre-trained without the
+    mono input (``bench pretrain --stereo-only``), else TRUNK_AT_0 (the no-VLM network)."""
+    if trunk.recipe.get("overrides", {}).get("model.use_mono") is False:
+        return ABLATIONS[1]
+    return TRUNK_AT_0
 
 
 def mono_figures(samples: list[StereoSample]) -> dict[str, dict[str, float]]:

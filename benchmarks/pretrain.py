@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks import fusion, provenance
-from benchmarks.trunk import TRUNK_FILE, save_trunk
+from benchmarks.trunk import STEREO_ONLY_TRUNK_FILE, TRUNK_FILE, save_trunk
 from dataset.models import TrainingRun
 from dataset.synthetic.io import FORMAT as SYNTHETIC_FORMAT
 from dataset.version import code_version
@@ -50,15 +50,18 @@ def pretrain_seeds(videos: int) -> tuple[int, ...]:
     return seeds
 
 
-def pretrain_overrides(steps: int) -> dict[str, Any]:
-    """The overrides of ``lite`` the pre-training run uses for ``steps`` steps."""
-    return {**fusion.TRAIN_OVERRIDES, "train.steps": steps, **PRETRAIN_OVERRIDES}
+def pretrain_overrides(steps: int, stereo_only: bool = False) -> dict[str, Any]:
+    """The overrides of ``lite`` the pre-training run uses for ``steps`` steps; ``stereo_only``: the
+    stereo-only network (its context encoder fed a constant, never the mono input)."""
+    return {**fusion.TRAIN_OVERRIDES, "train.steps": steps, **PRETRAIN_OVERRIDES,
+            **({"model.use_mono": False} if stereo_only else {})}
 
 
 def run_pretrain(work_dir: Path, *, videos: int = PRETRAIN_VIDEOS, frames: int = PRETRAIN_FRAMES,
-                 steps: int = PRETRAIN_STEPS) -> dict[str, Any]:
+                 steps: int = PRETRAIN_STEPS, stereo_only: bool = False) -> dict[str, Any]:
     """Prepare (or reuse) the pre-training data under ``work_dir/pretrain``, train on it for ``steps``
-    steps and write the trunk of the run's best checkpoint to ``work_dir/TRUNK_FILE``. Returns the
+    steps and write the trunk of the run's best checkpoint to ``work_dir/TRUNK_FILE`` (with
+    ``stereo_only``, the stereo-only network's, to ``work_dir/STEREO_ONLY_TRUNK_FILE``). Returns the
     trunk's record (file, sha256, recipe), the conditions of the pre-training data beside the test
     pairs', and the timings (seconds)."""
     started = time.perf_counter()
@@ -80,24 +83,27 @@ def run_pretrain(work_dir: Path, *, videos: int = PRETRAIN_VIDEOS, frames: int =
     data_sha256 = conditions.get("data_sha256") or provenance.pretrain_data_digest(seeds, frames)
     prepare_s = time.perf_counter() - started
     try:
-        run_id = fusion.launch_run(rt, PRETRAIN_SEED, pretrain_overrides(steps), split=PRETRAIN_SPLIT)
+        run_id = fusion.launch_run(rt, PRETRAIN_SEED, pretrain_overrides(steps, stereo_only), split=PRETRAIN_SPLIT)
         fusion.run_jobs(rt, runs=[run_id])
         checkpoint, train_s = fusion.trained_checkpoint(rt, run_id)
         with rt.sessions() as s:
             best_step = s.get(TrainingRun, run_id).best_step
     finally:
         rt.close()
-    recipe = {"preset": "lite", "overrides": pretrain_overrides(steps), "seed": PRETRAIN_SEED, "split": PRETRAIN_SPLIT,
+    overrides = pretrain_overrides(steps, stereo_only)
+    recipe = {"preset": "lite", "overrides": overrides, "seed": PRETRAIN_SEED, "split": PRETRAIN_SPLIT,
               "data": data, "run": run_id, "best_step": best_step, "code_version": code_version(),
-              "command": f"illusion-studio bench pretrain --videos {videos} --frames {frames} --steps {steps}",
+              "command": f"illusion-studio bench pretrain --videos {videos} --frames {frames} --steps {steps}"
+                         + (" --stereo-only" if stereo_only else ""),
               # The command alone does not rebuild the trunk once the preset's defaults move on.
-              "resolved_config": provenance.resolved_config("lite", pretrain_overrides(steps)),
+              "resolved_config": provenance.resolved_config("lite", overrides),
               "data_sha256": data_sha256,
               "provenance": {"commit": source_commit, "sources": sources}}
-    record = save_trunk(checkpoint, work_dir / TRUNK_FILE, recipe)
+    trunk_file = STEREO_ONLY_TRUNK_FILE if stereo_only else TRUNK_FILE
+    record = save_trunk(checkpoint, work_dir / trunk_file, recipe)
     timed = time.perf_counter()
     held_out = fusion.condition_ranges(fusion.condition_values(fusion.held_out_samples(fusion.TEST_SEEDS)))
-    return {"trunk": {**record, "file": str(TRUNK_FILE)},
+    return {"trunk": {**record, "file": str(trunk_file)},
             "conditions": {"training": conditions, "held_out": held_out}, "prepare_cached": cached,
             "timings_s": {"prepare": round(prepare_s, 1), "train": round(train_s, 1),
                           "render_pairs": round(time.perf_counter() - timed, 1),

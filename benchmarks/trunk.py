@@ -31,6 +31,8 @@ from model.presets import Config
 TRUNK_PREFIXES = ("mono.", "stereo_branch.")
 FORMAT = "illusion-studio-trunk/1"
 TRUNK_FILE = Path("pretrain") / "trunk.safetensors"  # under the benchmark's work dir
+# The stereo-only network's trunk (``bench pretrain --stereo-only``): a stereo branch that never read the mono.
+STEREO_ONLY_TRUNK_FILE = Path("pretrain") / "trunk-stereo-only.safetensors"
 
 
 @dataclass(frozen=True)

@@ -309,13 +309,15 @@ def test_cli_pretrain_passes_its_options_and_prints_the_conditions(tmp_path: Pat
     out = CliRunner().invoke(main, ["bench", "pretrain", "--work-dir", str(tmp_path), "--videos", "3", "--frames", "2",
                                     "--steps", "40"])
     assert out.exit_code == 0, out.output
-    assert calls == [{"work_dir": tmp_path.absolute(), "videos": 3, "frames": 2, "steps": 40}]
+    assert calls == [{"work_dir": tmp_path.absolute(), "videos": 3, "frames": 2, "steps": 40, "stereo_only": False}]
     assert "4 frames: 5.50 / 9.00 / 20.25" in out.output and "pre-training captures" in out.output
     assert "test pairs" in out.output and "ab" * 32 in out.output
     out = CliRunner().invoke(main, ["bench", "pretrain", "--json", "--work-dir", str(tmp_path)])
     assert out.exit_code == 0 and json.loads(out.output) == result
     assert calls[-1] == {"work_dir": tmp_path.absolute(), "videos": pretrain.PRETRAIN_VIDEOS,
-                         "frames": pretrain.PRETRAIN_FRAMES, "steps": pretrain.PRETRAIN_STEPS}
+                         "frames": pretrain.PRETRAIN_FRAMES, "steps": pretrain.PRETRAIN_STEPS, "stereo_only": False}
+    out = CliRunner().invoke(main, ["bench", "pretrain", "--json", "--stereo-only", "--work-dir", str(tmp_path)])
+    assert out.exit_code == 0 and calls[-1]["stereo_only"] is True
 
 
 def _intervals() -> dict[str, Any]:

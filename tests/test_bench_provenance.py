@@ -134,7 +134,9 @@ def test_bench_pretrain_records_what_rebuilds_its_trunk(tmp_path: Path, monkeypa
     monkeypatch.setattr(fusion, "condition_ranges", lambda _values: {})
     monkeypatch.setattr(provenance, "pretrain_data_digest",
                         lambda seeds, frames: digests.append((tuple(seeds), frames)) or "ab" * 32)
-    monkeypatch.setattr(pretrain, "save_trunk", lambda _ckpt, _path, recipe: saved.update(recipe) or {"sha256": "x"})
+    paths: list[Path] = []
+    monkeypatch.setattr(pretrain, "save_trunk",
+                        lambda _ckpt, path, recipe: paths.append(path) or saved.update(recipe) or {"sha256": "x"})
     pretrain.run_pretrain(tmp_path, videos=3, frames=2, steps=5)
     assert digests == [((10_000, 10_001, 10_002), 2)]  # once, when the workspace is prepared
     assert saved["data_sha256"] == "ab" * 32
@@ -142,3 +144,10 @@ def test_bench_pretrain_records_what_rebuilds_its_trunk(tmp_path: Path, monkeypa
     assert saved["resolved_config"]["train"]["steps"] == 5 and saved["resolved_config"]["model"]["use_vlm"] is False
     assert saved["provenance"]["sources"] == provenance.training_sources_fingerprint()
     assert set(saved["provenance"]["commit"]) == {"commit", "dirty"}
+    # the stereo-only trunk: a network that never reads the mono, kept in a file of its own
+    pretrain.run_pretrain(tmp_path, videos=3, frames=2, steps=5, stereo_only=True)
+    assert paths == [tmp_path / "pretrain" / "trunk.safetensors", tmp_path / "pretrain" / "trunk-stereo-only.safetensors"]
+    assert saved["resolved_config"]["model"]["use_mono"] is False and saved["command"].endswith("--stereo-only")
+    trunk = fusion.Trunk({}, "x", {"overrides": saved["overrides"]}, "trunk-stereo-only.safetensors")
+    assert fusion.trunk_network(trunk) is fusion.ABLATIONS[1]
+    assert fusion.trunk_network(fusion.Trunk({}, "x", {"overrides": {}}, "t")) is fusion.TRUNK_AT_0

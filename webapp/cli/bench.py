@@ -270,14 +270,18 @@ def fusion_benchmark(as_json: bool, seeds: int, steps: int | None, work_dir: Pat
               help="Rendered scenes (seeds 10000 on), default the benchmark's.")
 @click.option("--frames", type=click.IntRange(min=1, max=100), default=None, help="Frames per scene.")
 @click.option("--steps", type=click.IntRange(min=1), default=None, help="Training steps.")
-def pretrain_benchmark(as_json: bool, work_dir: Path, videos: int | None, frames: int | None, steps: int | None) -> None:
+@click.option("--stereo-only", is_flag=True,
+              help="Pre-train the stereo-only network (never reads the mono input) instead; its trunk goes to "
+                   "WORK_DIR/pretrain/trunk-stereo-only.safetensors.")
+def pretrain_benchmark(as_json: bool, work_dir: Path, videos: int | None, frames: int | None, steps: int | None,
+                       stereo_only: bool) -> None:
     """Pre-train lite's trunk (mono context encoder and stereo branch) on many rendered scenes with exact
     disparity, never the benchmark's seeds, through the product's training job; `bench fusion` then
     fine-tunes every network from it."""
     from benchmarks.pretrain import PRETRAIN_FRAMES, PRETRAIN_STEPS, PRETRAIN_VIDEOS, run_pretrain
 
     results = run_pretrain(work_dir.absolute(), videos=videos or PRETRAIN_VIDEOS, frames=frames or PRETRAIN_FRAMES,
-                           steps=steps or PRETRAIN_STEPS)
+                           steps=steps or PRETRAIN_STEPS, stereo_only=stereo_only)
     if as_json:
         click.echo(json.dumps(results))
         return
