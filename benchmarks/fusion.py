@@ -69,7 +69,7 @@ from dataset.readers.base import make_regions
 from dataset.readers.version import VersionReader, pin_dataset_version
 from dataset.samples import load_output, mask_name, store_outputs
 from dataset.services import jobs as job_service
-from dataset.services import training
+from dataset.services import pipeline, training
 from dataset.services import users as user_service
 from dataset.services.demo import accept_generated_samples, seed_reviews_and_annotations
 from dataset.services.ingest import ingest_params
@@ -435,7 +435,7 @@ def prepared_workspace(home: Path) -> tuple[Runtime, bool, dict[str, Any]]:
         for frame_id in s.scalars(select(Frame.id).where(Frame.state.in_((FrameState.prefiltered, FrameState.rejected)))):
             review_frame(s, frame_id, curator, "approve")
         for frame_id in seed_reviews_and_annotations(s, rt.media, curator, annotator, approve=FRAMES, annotate=FRAMES):
-            rt.submit(s, "generate", {"frame_id": frame_id}, annotator)
+            pipeline.submitted(s, rt.submit, pipeline.GenerateParams(frame_id), annotator)
     run_jobs(rt)
     with transaction(rt.sessions) as s:
         redraw_generated_mono(s, rt.media)

@@ -21,6 +21,7 @@ from dataset.db import transaction
 from dataset.geometry.benchmark import reference_plane_fit, reference_right_view
 from dataset.models import Frame, Job, Sample, User
 from dataset.services import jobs as job_service
+from dataset.services import pipeline
 from dataset.services.annotate import save_annotation
 from dataset.services.demo import true_regions
 from dataset.synthetic import read_video, write_synthetic_dataset
@@ -39,7 +40,7 @@ def run_generate_bench(size: tuple[int, int] = (1920, 1080), repeats: int = 3) -
         cpu, wall = [], []
         for _ in range(repeats):
             with transaction(rt.sessions) as s:
-                job_id = rt.submit(s, "generate", {"frame_id": frame_id}, None).id
+                job_id = pipeline.submitted(s, rt.submit, pipeline.GenerateParams(frame_id), None).id
             started = time.perf_counter()
             job_service.run_queued_jobs(HANDLERS, rt)
             wall.append(time.perf_counter() - started)

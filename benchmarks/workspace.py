@@ -13,6 +13,7 @@ from dataset.db import migrate, transaction
 from dataset.models import Frame, FrameState, Sample, User
 from dataset.readers.version import pin_dataset_version
 from dataset.services import jobs as job_service
+from dataset.services import pipeline
 from dataset.services import users as user_service
 from dataset.services.demo import seed_reviews_and_annotations
 from dataset.services.ingest import ingest_params
@@ -58,7 +59,7 @@ def accepted_samples_workspace(home: Path, scenes: list[Path]) -> Runtime:
         curator = user_service.create_user(s, "bench-curator", "curator", "bench-password")
         annotator = user_service.create_user(s, "bench-annotator", "annotator", "bench-password")
         for frame_id in seed_reviews_and_annotations(s, rt.media, curator, annotator):
-            rt.submit(s, "generate", {"frame_id": frame_id}, None)
+            pipeline.submitted(s, rt.submit, pipeline.GenerateParams(frame_id), None)
     job_service.run_queued_jobs(HANDLERS, rt)
     with transaction(rt.sessions) as s:
         curator = s.scalar(select(User).where(User.name == "bench-curator"))

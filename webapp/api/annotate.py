@@ -2,17 +2,15 @@
 
 from __future__ import annotations
 
-import contextlib
-
 from flask import g
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
 from dataset.formats import FormatError, mask_to_rle, rle_to_mask
 from dataset.models import Frame, RegionKind, Role, User
-from dataset.services import annotate, leases, proposals, sample_blockers, sample_review, segmentation
+from dataset.services import annotate, leases, pipeline, proposals, sample_blockers, sample_review, segmentation
 from dataset.services import jobs as job_service
-from dataset.services.errors import InvalidInput, NotFound, Unavailable
+from dataset.services.errors import InvalidInput, NotFound
 from dataset.services.validate import db_int, optional_text
 from webapp.api.blueprint import api, get_or_404, json_body
 from webapp.auth import requires
@@ -26,23 +24,8 @@ def _iso(value) -> str:  # type: ignore[no-untyped-def]
 
 def _prefetch(frame: Frame) -> None:
     """Queue embeddings and proposals for this frame and the next ones of its video, so clicks never wait."""
-    settings = runtime().settings
-    ids = leases.prefetch_ids(g.db, frame)
-    missing = segmentation.frames_to_encode(g.db, settings, ids)
-    if missing:
-        runtime().submit(g.db, "encode", {"frame_ids": missing}, g.db.get(User, current_user.id))
-    queue_proposals(ids)
-
-
-def queue_proposals(frame_ids: list[int]) -> None:
-    """Queue the configured proposers on those of ``frame_ids`` they have not looked at (in the request's
-    transaction): frames entering the annotation queue get their proposals ahead of the annotator."""
-    todo = proposals.frames_to_scan(g.db, runtime().settings, frame_ids)
-    # A queue that is down costs nothing here (taking, keeping or approving a frame goes on): the next
-    # lease renewal queues them again.
-    with contextlib.suppress(Unavailable):
-        for chunk in proposals.propose_chunks(todo):
-            runtime().submit(g.db, "propose", {"frame_ids": chunk}, g.db.get(User, current_user.id))
+    rt = runtime()
+    pipeline.leased(g.db, rt.submit, rt.settings, frame, g.db.get(User, current_user.id))
 
 
 @api.post("/queue/annotate/next")
@@ -127,8 +110,8 @@ def save_annotation(frame_id: int) -> ResponseReturnValue:
                 "sample_blocker": blocker, "frame_id": frame_id, "annotation_version": ann.version,
                 "submitted": False, "state": g.db.get(Frame, frame_id).state.value}, 409
     if submit:
-        runtime().submit(g.db, "generate", {"frame_id": frame_id, "annotation_version": ann.version},
-                         g.db.get(User, current_user.id))
+        pipeline.submitted(g.db, runtime().submit, pipeline.GenerateParams(frame_id, ann.version),
+                           g.db.get(User, current_user.id))
     g.db.commit()
     return {"frame_id": frame_id, "annotation_version": ann.version, "submitted": ann.submitted,
             "state": g.db.get(Frame, frame_id).state.value}

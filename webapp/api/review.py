@@ -7,15 +7,20 @@ from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
 from annotation.vlm import QUESTION_LABELS
-from dataset.models import Role
+from dataset.models import Role, User
+from dataset.services import pipeline, sample_blockers
 from dataset.services import review as review_service
-from dataset.services import sample_blockers
 from dataset.services.errors import Conflict
 from dataset.services.validate import db_int, optional_text
-from webapp.api.annotate import queue_proposals
 from webapp.api.blueprint import api, cursor_args, int_arg, json_body
 from webapp.auth import requires
 from webapp.runtime import runtime
+
+
+def _approved(frame_ids: list[int]) -> None:
+    """Approved frames enter the annotation queue: their proposals are queued (in the request's transaction)."""
+    rt = runtime()
+    pipeline.approved(g.db, rt.submit, rt.settings, frame_ids, g.db.get(User, current_user.id))
 
 
 @api.get("/review/frames")
@@ -46,7 +51,7 @@ def review_frame(frame_id: int) -> ResponseReturnValue:
         current = review_service.current_item(g.db, frame_id)
         return {"error": str(exc), "status": 409, "frame": current}, 409
     item = review_service.current_item(g.db, frame.id)
-    queue_proposals([frame.id])  # an approved frame enters the annotation queue
+    _approved([frame.id])
     g.db.commit()
     return item
 
@@ -59,7 +64,7 @@ def review_bulk() -> ResponseReturnValue:
     results = review_service.review_many(g.db, items if isinstance(items, list) else [], current_user,
                                          optional_text(body.get("decision"), "decision"),
                                          optional_text(body.get("reason"), "reason"))
-    queue_proposals([r["id"] for r in results if r["status"] == 200])
+    _approved([r["id"] for r in results if r["status"] == 200])
     g.db.commit()
     return {"results": results}
 

@@ -7,7 +7,7 @@ from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
 from dataset.models import Role, Sample, User
-from dataset.services import evaluations, sample_review
+from dataset.services import evaluations, pipeline, sample_review
 from dataset.services import jobs as job_service
 from dataset.services.errors import InvalidInput
 from dataset.services.validate import optional_text
@@ -76,7 +76,7 @@ def review_sample(sample_id: int) -> ResponseReturnValue:
 @requires(Role.curator)
 def regenerate_sample(sample_id: int) -> ResponseReturnValue:
     sample = get_or_404(Sample, sample_id, "sample")
-    job = runtime().submit(g.db, "generate", {"frame_id": sample.frame_id, "annotation_version": sample.annotation_version},
-                           g.db.get(User, current_user.id))
+    job = pipeline.submitted(g.db, runtime().submit, pipeline.GenerateParams(sample.frame_id, sample.annotation_version),
+                             g.db.get(User, current_user.id))
     g.db.commit()
     return job_service.job_json(job), 202

@@ -192,8 +192,8 @@ def _prepare_demo(rt: Runtime) -> None:
     Runs the jobs in this process (the same code a worker runs), so that every page has content
     the moment the server starts.
     """
+    from dataset.services import pipeline
     from dataset.services.demo import seed_reviews_and_annotations
-    from dataset.services.proposals import frames_to_scan, propose_chunks
 
     with click.progressbar(length=2, label="preparing the demo", file=sys.stderr) as bar:
         _run_here(rt)
@@ -202,11 +202,10 @@ def _prepare_demo(rt: Runtime) -> None:
             curator = s.scalar(select(User).where(User.name == Role.curator.value))
             annotator = s.scalar(select(User).where(User.name == Role.annotator.value))
             for frame_id in seed_reviews_and_annotations(s, rt.media, curator, annotator):
-                rt.submit(s, "generate", {"frame_id": frame_id}, annotator)
+                pipeline.submitted(s, rt.submit, pipeline.GenerateParams(frame_id), annotator)
             # The approved frames left to annotate get their proposals now, as a curator's approval queues them.
             waiting = s.scalars(select(Frame.id).where(Frame.state == FrameState.approved).order_by(Frame.id)).all()
-            for chunk in propose_chunks(frames_to_scan(s, rt.settings, waiting)):
-                rt.submit(s, "propose", {"frame_ids": chunk}, curator)
+            pipeline.approved(s, rt.submit, rt.settings, waiting, curator)
         _run_here(rt)
         bar.update(1)
 
