@@ -4,10 +4,14 @@ network: read weights-only, the architecture inferred from the tensors, every ke
 
 What the tensors fix: ``n_downsample`` (the mask head's 9·f² rows), the GRU levels (one
 ``context_zqr_convs`` per level), their width, a shared backbone (no ``fnet``; ``conv2`` on the
-context trunk) and a batch-norm context encoder (running statistics). What they do not fix comes
-from the flags RAFT-Stereo's README gives its files (:data:`PUBLISHED`): a context encoder without
-norm tensors is instance-normed (iraftstereo_rvc), a shared backbone with 2 levels runs the
-slow–fast GRU schedule (realtime). Convex upsampling pads with zeros, as RAFT-Stereo does.
+context trunk), the context encoder's norm when it has tensors (running statistics: batch; scales
+alone: group) and the correlation planes the motion encoder reads (levels × (2·radius + 1)). What they
+do not fix — a norm without tensors (instance or none), the slow–fast GRU schedule (a way of running,
+not a weight), how the planes split into levels and radius — comes from the flags RAFT-Stereo's README
+gives its published files (:data:`PUBLISHED`, with each file's documented iterations) when the tensors
+show one of those layouts, and otherwise from the importer's flags (:class:`Flags`): a file of another
+layout is refused, naming the flags to give, never imported on a guess. Convex upsampling pads with
+zeros, as RAFT-Stereo does.
 
 Two kinds of the file's tensors have no place of their own: RAFT-Stereo's residual blocks hold their
 shortcut's norm twice (``norm3`` and ``downsample.1``, one module), and with fewer than 3 GRU levels
@@ -34,16 +38,29 @@ SOURCE = "raft-stereo"
 PREFIX = "stereo_branch."  # where the network keeps the RAFT-Stereo branch
 # The published files' documented flags, by what their tensors show: (shared backbone, GRU levels,
 # n_downsample, the context encoder's norm tensors: "batch" running statistics, "affine" scales
-# alone, "none") → (files, context_norm, slow_fast_gru).
-PUBLISHED: dict[tuple[bool, int, int, str], tuple[str, str, bool]] = {
-    (False, 3, 2, "batch"): ("raftstereo-sceneflow, raftstereo-middlebury, raftstereo-eth3d", "batch", False),
-    (True, 2, 3, "batch"): ("raftstereo-realtime", "batch", True),
-    (False, 3, 2, "none"): ("iraftstereo_rvc", "instance", False),
+# alone, "none") → (files, context_norm, slow_fast_gru, iterations). The iterations are those RAFT-Stereo's
+# README runs each with (--valid_iters; the realtime model's 7), the network's default for them.
+PUBLISHED: dict[tuple[bool, int, int, str], tuple[str, str, bool, int]] = {
+    (False, 3, 2, "batch"): ("raftstereo-sceneflow, raftstereo-middlebury, raftstereo-eth3d", "batch", False, 32),
+    (True, 2, 3, "batch"): ("raftstereo-realtime", "batch", True, 7),
+    (False, 3, 2, "none"): ("iraftstereo_rvc", "instance", False, 32),
 }
-# Other layouts follow the same rules: norm tensors name the norm (no tensors: instance, as
-# iraftstereo_rvc), a shared backbone with 2 levels runs slow–fast (as raftstereo-realtime).
-_NORM_RULE = {"batch": "batch", "affine": "group", "none": "instance"}
+_SETTLED_NORM = {"batch": "batch", "affine": "group"}  # norm tensors that name the norm; none: instance or none
 CORR_LEVELS, CORR_RADIUS = 4, 4  # every published file's (the motion encoder's 36 correlation planes)
+DEMO_ITERATIONS = 32  # RAFT-Stereo's demo default (--valid_iters): a file of another layout runs with it unless told
+
+
+@dataclass(frozen=True)
+class Flags:
+    """What an importer says of a file's architecture where its tensors do not: RAFT-Stereo's argparse
+    options (``--context_norm``, ``--slow_fast_gru``, ``--corr_levels``, ``--corr_radius``,
+    ``--valid_iters``). None: not given (a published layout's documented value, or a refusal)."""
+
+    context_norm: str | None = None
+    slow_fast_gru: bool | None = None
+    corr_levels: int | None = None
+    corr_radius: int | None = None
+    iterations: int | None = None
 
 
 def _prefixes() -> list[tuple[str, str]]:
@@ -117,10 +134,12 @@ def strip_module(state: Mapping[str, Any]) -> dict[str, Any]:
     return {key.removeprefix("module."): value for key, value in state.items()}
 
 
-def infer_architecture(state: Mapping[str, Tensor]) -> dict[str, Any]:
+def infer_architecture(state: Mapping[str, Tensor], flags: Flags = Flags()) -> dict[str, Any]:
     """The ``raft-stereo`` network's options for a RAFT-Stereo state dict (``module.`` stripped):
     ``{"n_downsample", "gru_levels", "hidden", "shared_backbone", "context_norm", "slow_fast_gru",
-    "corr_levels", "corr_radius", "feature_dim", "published"}``. NotRaftStereo naming what is missing."""
+    "corr_levels", "corr_radius", "feature_dim", "iterations", "published", "given"}``, what the tensors
+    do not settle taken from ``flags``, else from the published layout the tensors show (module doc).
+    NotRaftStereo naming what is missing, what contradicts the tensors, or the flags to give."""
     required = ["update_block.mask.2.weight", "context_zqr_convs.0.weight", "cnet.conv1.weight",
                 "update_block.encoder.convc1.weight"]
     missing = [key for key in required if key not in state]
@@ -141,34 +160,66 @@ def infer_architecture(state: Mapping[str, Tensor]) -> dict[str, Any]:
     if shared and "conv2.1.weight" not in state:
         raise NotRaftStereo("no fnet and no conv2 (the shared backbone's matching head): not a RAFT-Stereo checkpoint")
     planes = state["update_block.encoder.convc1.weight"].shape[1]
-    if planes != CORR_LEVELS * (2 * CORR_RADIUS + 1):
-        raise NotRaftStereo(f"the motion encoder reads {planes} correlation planes, not RAFT-Stereo's "
-                            f"{CORR_LEVELS} levels × (2·{CORR_RADIUS}+1)")
     tensors = ("batch" if "cnet.norm1.running_mean" in state else "affine" if "cnet.norm1.weight" in state
                else "none")
     n_downsample = 2 if factor == 4 else 3
-    files, norm, slow_fast = PUBLISHED.get((shared, levels, n_downsample, tensors),
-                                           (None, _NORM_RULE[tensors], shared and levels == 2))
+    published = PUBLISHED.get((shared, levels, n_downsample, tensors)) if planes == CORR_LEVELS * (2 * CORR_RADIUS + 1) \
+        else None
+    norm, slow_fast, corr, iterations = _unsettled(tensors, planes, published, flags)
     feature_dim = state["conv2.1.weight" if shared else "fnet.conv2.weight"].shape[0]
+    given = sorted(name for name, value in vars(flags).items() if value is not None)
     return {"n_downsample": n_downsample, "gru_levels": levels, "hidden": hidden.pop(), "shared_backbone": shared,
-            "context_norm": norm, "slow_fast_gru": slow_fast, "corr_levels": CORR_LEVELS, "corr_radius": CORR_RADIUS,
-            "feature_dim": feature_dim, "published": files}
+            "context_norm": norm, "slow_fast_gru": slow_fast, "corr_levels": corr[0], "corr_radius": corr[1],
+            "feature_dim": feature_dim, "iterations": iterations, "published": published[0] if published else None,
+            "given": given}
 
 
-def convert(state: Mapping[str, Any]) -> Conversion:
+def _unsettled(tensors: str, planes: int, published: tuple[str, str, bool, int] | None,
+               flags: Flags) -> tuple[str, bool, tuple[int, int], int]:
+    """(context norm, slow-fast, (corr levels, radius), iterations): each from ``flags`` when given (checked
+    against what the tensors do settle), else the ``published`` layout's; NotRaftStereo naming every flag
+    a file of another layout needs."""
+    settled_norm = _SETTLED_NORM.get(tensors)
+    if flags.context_norm is not None:
+        possible = (settled_norm,) if settled_norm else ("instance", "none")
+        if flags.context_norm not in possible:
+            raise NotRaftStereo(f"--context-norm {flags.context_norm} does not fit the file: its context encoder "
+                                f"{'has ' + tensors + ' norm tensors' if settled_norm else 'has no norm tensors'}, "
+                                f"so its norm is {' or '.join(possible)}")
+    if flags.corr_levels is not None and flags.corr_radius is not None \
+            and flags.corr_levels * (2 * flags.corr_radius + 1) != planes:
+        raise NotRaftStereo(f"--corr-levels {flags.corr_levels} × (2·--corr-radius {flags.corr_radius} + 1) is not the "
+                            f"{planes} correlation planes the file's motion encoder reads")
+    norm = flags.context_norm or settled_norm or (published[1] if published else None)
+    slow_fast = flags.slow_fast_gru if flags.slow_fast_gru is not None else (published[2] if published else None)
+    corr = ((flags.corr_levels, flags.corr_radius) if flags.corr_levels is not None and flags.corr_radius is not None
+            else (CORR_LEVELS, CORR_RADIUS) if published else None)
+    needed = ([] if norm else ["--context-norm instance|none (its context encoder has no norm tensors)"]) \
+        + ([] if slow_fast is not None else ["--slow-fast or --no-slow-fast (a way of running: no tensor holds it)"]) \
+        + ([] if corr else [f"--corr-levels and --corr-radius (levels × (2·radius + 1) = its {planes} planes)"])
+    if needed:
+        raise NotRaftStereo("the tensors do not show one of RAFT-Stereo's published layouts, and do not settle its "
+                            "architecture: give " + "; ".join(needed))
+    iterations = flags.iterations or (published[3] if published else DEMO_ITERATIONS)
+    return norm, bool(slow_fast), corr, iterations
+
+
+def convert(state: Mapping[str, Any], flags: Flags = Flags()) -> Conversion:
     """A RAFT-Stereo state dict (as loaded; ``module.`` optional) → the ``raft-stereo`` network's
-    config and state. NotRaftStereo naming what is missing, unknown or of the wrong shape."""
+    config (its test iterations the architecture's documented ones) and state; ``flags``: what the
+    tensors do not settle (:func:`infer_architecture`). NotRaftStereo naming what is missing, unknown or
+    of the wrong shape, or the flags to give."""
     state = strip_module(state)
     not_tensors = [key for key, value in state.items() if not isinstance(value, torch.Tensor)]
     if not_tensors:
         raise NotRaftStereo(f"not a state dict of tensors: {not_tensors[0]} is a {type(state[not_tensors[0]]).__name__}")
-    arch = infer_architecture(state)
+    arch = infer_architecture(state, flags)
     config = load_preset(SOURCE, {
         "n_downsample": arch["n_downsample"], "gru_levels": arch["gru_levels"],
         "hidden_dims": [arch["hidden"]] * 3, "shared_backbone": arch["shared_backbone"],
         "context_norm": arch["context_norm"], "slow_fast_gru": arch["slow_fast_gru"], "feature_dim": arch["feature_dim"],
         "corr_levels": arch["corr_levels"], "corr_radius": arch["corr_radius"], "upsample_border": "zeros",
-        "amp": False})  # as its demo: float32
+        "amp": False, "test_iters": arch["iterations"]})  # as its demo: float32
     network = FusionNetwork(config.model)
     expected = network.state_dict()
     mapped: dict[str, Tensor] = {}
@@ -213,13 +264,13 @@ def read_published(path: Path) -> dict[str, Any]:
     return dict(state)
 
 
-def import_file(path: Path, destination: Path) -> dict[str, Any]:
-    """Convert the published file ``path`` and write it, as a checkpoint of this project's format, to
-    ``destination`` (atomically). Returns ``{"architecture", "config", "keys_loaded", "tensors_in_file",
-    "duplicates", "unused"}``."""
+def import_file(path: Path, destination: Path, flags: Flags = Flags()) -> dict[str, Any]:
+    """Convert the published file ``path`` (what its tensors do not settle from ``flags``) and write it, as
+    a checkpoint of this project's format, to ``destination`` (atomically). Returns ``{"architecture",
+    "config", "keys_loaded", "tensors_in_file", "duplicates", "unused"}``."""
     from model.checkpoint import save_checkpoint
 
-    conversion = convert(read_published(path))
+    conversion = convert(read_published(path), flags)
     digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
     source = {"from": SOURCE, "file": Path(path).name, "sha256": digest, "architecture": conversion.architecture,
               "imported_at": datetime.now(UTC).isoformat(timespec="seconds")}

@@ -231,14 +231,18 @@ IMPORT_SOURCES = ("raft-stereo", "depth-anything-v2")
 
 
 def import_checkpoint(settings: Any, file: Path, *, source: str, name: str | None = None,
-                      replace: bool = False) -> dict[str, Any]:
+                      replace: bool = False, flags: Any = None) -> dict[str, Any]:
     """Convert the published checkpoint ``file`` (``source``: one of IMPORT_SOURCES) and register it
     in the workspace as ``imported:NAME`` (default NAME: the file's stem): a RAFT-Stereo file as
     ``NAME.pt``, a Depth Anything V2 one as the directory ``NAME/``. Returns ``{"checkpoint":
     the name, "architecture", "keys_loaded", …}``; InvalidInput for a bad name or a file that is not
-    such a checkpoint (one line), Conflict when the name is taken and ``replace`` is not given."""
+    such a checkpoint (one line), Conflict when the name is taken and ``replace`` is not given.
+    ``flags``: a RAFT-Stereo file's architecture where its tensors do not settle it
+    (``model.raft_import.Flags``; InvalidInput for another source)."""
     if source not in IMPORT_SOURCES:
         raise InvalidInput(f"unknown checkpoint source {source!r}; choose one of {', '.join(IMPORT_SOURCES)}")
+    if flags is not None and source != "raft-stereo":
+        raise InvalidInput(f"architecture flags are for RAFT-Stereo files; a {source} file's tensors settle its own")
     name = name or re.sub(r"[^A-Za-z0-9._-]", "-", Path(file).stem).lstrip("._-")[:64] or source
     stereo, depth = imported_path(Path(settings.home), name), imported_model_dir(Path(settings.home), name)
     # One namespace for both kinds: imported:NAME must name one thing.
@@ -256,7 +260,10 @@ def import_checkpoint(settings: Any, file: Path, *, source: str, name: str | Non
 
         import_file = functools.partial(import_depth, read=read_weights_only)
     else:
-        from model.raft_import import import_file
+        from model.raft_import import Flags
+        from model.raft_import import import_file as import_raft
+
+        import_file = functools.partial(import_raft, flags=flags or Flags())
     try:
         result = import_file(Path(file), destination)
     except ValueError as exc:  # not a checkpoint of that source, unreadable, or a pickle naming code

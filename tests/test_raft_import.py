@@ -18,7 +18,7 @@ torch = pytest.importorskip("torch")
 
 from dataset.formats import read_pfm, write_rgb  # noqa: E402
 from model.checkpoint import load_checkpoint  # noqa: E402
-from model.raft_import import NotRaftStereo, convert, infer_architecture, strip_module  # noqa: E402
+from model.raft_import import Flags, NotRaftStereo, convert, infer_architecture, strip_module  # noqa: E402
 from tests.raft_golden import fixture_state, load_fixture  # noqa: E402
 from webapp.cli import main  # noqa: E402
 
@@ -26,11 +26,12 @@ from webapp.cli import main  # noqa: E402
 COUNTS = {"default": (337, 317, 20, 0), "realtime": (309, 244, 20, 45), "rvc": (152, 152, 0, 0)}
 ARCHITECTURES = {
     "default": {"n_downsample": 2, "gru_levels": 3, "shared_backbone": False, "context_norm": "batch",
-                "slow_fast_gru": False, "published": "raftstereo-sceneflow, raftstereo-middlebury, raftstereo-eth3d"},
+                "slow_fast_gru": False, "iterations": 32,
+                "published": "raftstereo-sceneflow, raftstereo-middlebury, raftstereo-eth3d"},
     "realtime": {"n_downsample": 3, "gru_levels": 2, "shared_backbone": True, "context_norm": "batch",
-                 "slow_fast_gru": True, "published": "raftstereo-realtime"},
+                 "slow_fast_gru": True, "iterations": 7, "published": "raftstereo-realtime"},
     "rvc": {"n_downsample": 2, "gru_levels": 3, "shared_backbone": False, "context_norm": "instance",
-            "slow_fast_gru": False, "published": "iraftstereo_rvc"},
+            "slow_fast_gru": False, "iterations": 32, "published": "iraftstereo_rvc"},
 }
 
 
@@ -79,10 +80,26 @@ def test_architecture_is_read_from_the_tensors_and_the_published_flags() -> None
     for name, expected in ARCHITECTURES.items():
         state = strip_module(fixture_state(load_fixture(name)))
         assert infer_architecture(state).items() >= expected.items()
-    # A layout no published file has: flags the tensors do not fix follow the same rules.
+    # A layout no published file has (2 GRU levels, no norm tensors): refused, naming every flag to give.
     state = strip_module(fixture_state(load_fixture("rvc")))
-    arch = infer_architecture({k: v for k, v in state.items() if not k.startswith("context_zqr_convs.2")})
-    assert arch["gru_levels"] == 2 and arch["published"] is None and not arch["slow_fast_gru"]
+    two_levels = {k: v for k, v in state.items() if not k.startswith("context_zqr_convs.2")}
+    with pytest.raises(NotRaftStereo, match="give --context-norm instance|none .*--slow-fast or --no-slow-fast"
+                                            ".*--corr-levels and --corr-radius"):
+        infer_architecture(two_levels)
+    with pytest.raises(NotRaftStereo, match="give --slow-fast or --no-slow-fast"):
+        infer_architecture(two_levels, Flags(context_norm="none", corr_levels=4, corr_radius=4))
+    arch = infer_architecture(two_levels, Flags(context_norm="none", slow_fast_gru=False, corr_levels=4, corr_radius=4))
+    assert arch["gru_levels"] == 2 and arch["published"] is None and arch["context_norm"] == "none"
+    assert not arch["slow_fast_gru"] and arch["iterations"] == 32  # RAFT-Stereo's demo default
+    assert arch["given"] == ["context_norm", "corr_levels", "corr_radius", "slow_fast_gru"]
+    # flags the tensors contradict are refused; a published layout takes the importer's word where given
+    with pytest.raises(NotRaftStereo, match="--context-norm batch does not fit the file"):
+        infer_architecture(state, Flags(context_norm="batch"))
+    with pytest.raises(NotRaftStereo, match="is not the 36 correlation planes"):
+        infer_architecture(state, Flags(corr_levels=4, corr_radius=3))
+    realtime = strip_module(fixture_state(load_fixture("realtime")))
+    assert infer_architecture(realtime, Flags(slow_fast_gru=False, iterations=12)).items() >= {
+        "slow_fast_gru": False, "iterations": 12, "published": "raftstereo-realtime"}.items()
 
 
 @pytest.fixture(scope="module")
@@ -132,3 +149,29 @@ def test_the_cli_refuses_in_one_line_and_registers_nothing(home: Path, tmp_path:
     assert again.exit_code == 1 and "imported:rvc exists" in again.output
     assert _cli(home, "checkpoints", "import", "--from", "raft-stereo", str(good), "--name", "rvc",
                 "--replace").exit_code == 0
+
+
+def test_the_cli_refuses_an_unsettled_layout_until_its_flags_are_given(home: Path, tmp_path: Path) -> None:
+    """A 2-level file without norm tensors (no published layout): the refusal names the flags; given, it
+    imports with them and RAFT-Stereo's demo iterations; flags are refused for a Depth Anything file."""
+    from model.network import FusionNetwork
+    from model.presets import load_preset
+    from model.raft_import import PREFIX, to_theirs
+
+    torch.manual_seed(0)
+    built = FusionNetwork(load_preset("raft-stereo", {"gru_levels": 2, "context_norm": "none"}).model)
+    custom = tmp_path / "custom.pth"
+    torch.save({"module." + to_theirs(k.removeprefix(PREFIX)): v for k, v in built.state_dict().items()}, custom)
+    refused = _cli(home, "checkpoints", "import", "--from", "raft-stereo", str(custom))
+    assert refused.exit_code != 0 and "--slow-fast or --no-slow-fast" in refused.output
+    assert "--context-norm instance|none" in refused.output and not (home / "checkpoints" / "imported").exists() \
+        or not any((home / "checkpoints" / "imported").iterdir())
+    imported = _cli(home, "checkpoints", "import", "--from", "raft-stereo", str(custom), "--json", "--context-norm",
+                    "instance", "--no-slow-fast", "--corr-levels", "4", "--corr-radius", "4", "--iters", "20")
+    assert imported.exit_code == 0, imported.output
+    arch = json.loads(imported.output)["architecture"]
+    assert (arch["gru_levels"], arch["context_norm"], arch["slow_fast_gru"], arch["iterations"]) == (2, "instance", False, 20)
+    payload = load_checkpoint(home / "checkpoints" / "imported" / "custom.pt")
+    assert payload["config"]["train"]["test_iters"] == 20
+    wrong = _cli(home, "checkpoints", "import", "--from", "depth-anything-v2", str(custom), "--slow-fast")
+    assert wrong.exit_code != 0 and "architecture flags are for RAFT-Stereo files" in wrong.output

@@ -19,16 +19,36 @@ from webapp.cli.state import CliState, pass_state
                    "depth-anything-v2 (DepthAnything/Depth-Anything-V2's depth_anything_v2_vit*.pth).")
 @click.option("--name", default=None, help="Register it as imported:NAME (default: FILE's name, no extension).")
 @click.option("--replace", is_flag=True, help="Replace an imported checkpoint of that name.")
+@click.option("--context-norm", type=click.Choice(["batch", "group", "instance", "none"]), default=None,
+              help="RAFT-Stereo's --context_norm, for a file whose context encoder has no norm tensors "
+                   "(instance or none) and is not a published layout.")
+@click.option("--slow-fast/--no-slow-fast", "slow_fast", default=None,
+              help="RAFT-Stereo's --slow_fast_gru (no tensor holds it): needed unless the file is a published layout.")
+@click.option("--corr-levels", type=click.IntRange(1, 8), default=None, help="RAFT-Stereo's --corr_levels.")
+@click.option("--corr-radius", type=click.IntRange(1, 16), default=None, help="RAFT-Stereo's --corr_radius.")
+@click.option("--iters", type=click.IntRange(1, 256), default=None,
+              help="Its default iterations for predict and evaluate (default: the published file's documented "
+                   "ones — realtime 7, the others 32 — else RAFT-Stereo's demo's 32).")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as one JSON object.")
 @pass_state
 def import_checkpoint(state: CliState, file: Path, source: str, name: str | None, replace: bool,
-                      as_json: bool) -> None:
+                      context_norm: str | None, slow_fast: bool | None, corr_levels: int | None,
+                      corr_radius: int | None, iters: int | None, as_json: bool) -> None:
     """Read FILE weights-only (a file that holds code is refused), infer its architecture from its
     tensors, map every key and register it; `predict --checkpoint imported:NAME` then runs it (a Depth
     Anything V2 file: `depth IMAGE --checkpoint imported:NAME`). Nothing is downloaded: each project's
-    README says where its files are."""
+    README says where its files are. A RAFT-Stereo file whose tensors show none of the published layouts
+    is refused unless the flags its tensors cannot settle are given (the refusal names them)."""
+    given = {"context_norm": context_norm, "slow_fast_gru": slow_fast, "corr_levels": corr_levels,
+             "corr_radius": corr_radius, "iterations": iters}
+    flags = None
+    if any(value is not None for value in given.values()):
+        from model.raft_import import Flags
+
+        flags = Flags(**given)
     with service_errors():
-        result = registry.import_checkpoint(state.settings, file, source=source, name=name, replace=replace)
+        result = registry.import_checkpoint(state.settings, file, source=source, name=name, replace=replace,
+                                            flags=flags)
     if as_json:
         click.echo(json.dumps(result, indent=2))
         return
@@ -42,7 +62,8 @@ def import_checkpoint(state: CliState, file: Path, source: str, name: str | None
     click.echo(f"{result['checkpoint']}: RAFT-Stereo ({arch['published'] or 'a layout none of the published files has'}"
                f"), n_downsample {arch['n_downsample']}, {arch['gru_levels']} GRU levels of {arch['hidden']}, "
                f"{arch['context_norm']}-norm context, {'shared backbone, ' if arch['shared_backbone'] else ''}"
-               f"{'slow-fast GRU, ' if arch['slow_fast_gru'] else ''}{result['keys_loaded']} tensors loaded "
+               f"{'slow-fast GRU, ' if arch['slow_fast_gru'] else ''}{arch['iterations']} iterations by default, "
+               f"{result['keys_loaded']} tensors loaded "
                f"({result['tensors_in_file']} in the file: {result['duplicates']} duplicates, "
                f"{len(result['unused'])} never used by RAFT-Stereo at this architecture)")
     fits = result["fits"]
