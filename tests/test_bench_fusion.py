@@ -1,4 +1,4 @@
-"""`bench fusion` (issue 22, items 2 and 5; issue 30) without training: the ablation networks' configs and
+"""`bench fusion` without training: the ablation networks' configs and
 what they predict, the validation split's own seeds, and the report's methods, paired record and timings."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The fusion benchmark's protocol 2 (issue 30): frozen held-out pairs, a split fixed across seeds, the
+"""The fusion benchmark's protocol 2: frozen held-out pairs, a split fixed across seeds, the
 paired record, the training data's conditions (capture baselines, an independent mono input), the
 pre-training seeds, and the pre-trained trunk that every network is fine-tuned from."""
 

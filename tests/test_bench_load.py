@@ -1,4 +1,4 @@
-"""`bench load` (issue 13): annotators and curators against a served app with a worker answer no 5xx
+"""`bench load`: annotators and curators against a served app with a worker answer no 5xx
 and lose no acknowledged write, on SQLite always and on PostgreSQL + Redis when both are given;
 and its read-back finds writes that are missing."""
 

@@ -1,4 +1,4 @@
-"""Issue 40 (5): the benchmark's records can rebuild what they report — the committed trunk is the one
+"""The benchmark's records can rebuild what they report — the committed trunk is the one
 every JSON cites, its record holds the config it really trained with and a hash of its data, and the
 provenance helpers hash what they say they hash."""
 

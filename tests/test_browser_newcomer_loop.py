@@ -1,5 +1,5 @@
-"""The curator→annotator loop and the run pages in a real browser at 1366×768 (issue 33: 3, 4, 5, 7, 9,
-10, 12): Annotate names the frame a curator sent back while the annotator holds another, and its link
+"""The curator→annotator loop and the run pages in a real browser at 1366×768:
+Annotate names the frame a curator sent back while the annotator holds another, and its link
 opens it with the held frame's lease kept; the proposals panel counts a frame's decided proposals
 instead of saying it had none; a curator rejects a sample with a note, and the page says who, when
 and why, a rejected sample and its frame's resubmission linking each other; a cancelled run's job

@@ -1,4 +1,4 @@
-"""The Models page in a real browser (issue 29, item 6): an admin starts a run's stereo branch from an
+"""The Models page in a real browser: an admin starts a run's stereo branch from an
 imported RAFT-Stereo checkpoint, and the run page says which tensors came from the file."""
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
-"""Starting the fusion network's stereo branch from an imported RAFT-Stereo checkpoint (issue 29,
-item 6): the mapped tensors compute what RAFT-Stereo's did (motion encoder zero-padded, flow x as
+"""Starting the fusion network's stereo branch from an imported RAFT-Stereo checkpoint:
+the mapped tensors compute what RAFT-Stereo's did (motion encoder zero-padded, flow x as
 −disparity, gru0's columns moved, the head's row 0 negated); the engine loads the tensors that fit,
 records which started fresh, and the run's JSON says so."""
 

@@ -1,4 +1,4 @@
-"""Launches that cannot start are refused (issue 28): a preset whose model weights no setting names
+"""Launches that cannot start are refused: a preset whose model weights no setting names
 is a 4xx at launch, from the launch schema, naming the setting; what only a train worker can tell
 (its own settings' directories, an init checkpoint promote would refuse, a config it was not
 trained with) fails the run on that worker before torchrun starts, with the reason and no path."""

@@ -1,4 +1,4 @@
-"""Links at and below runs/ and evaluations/ (issue 28, Medium 3 and Low 1): those two folders may be an
+"""Links at and below runs/ and evaluations/: those two folders may be an
 admin's links (shared storage), resolved once at start-up; nothing below them may be a link — a run's or a
 report's own folder included — for serving or for writing; a report written elsewhere (``evaluate --out``)
 is not served; odd names in a dataset root (a part over 255 characters, a link loop) are a 4xx."""

@@ -1,4 +1,4 @@
-"""A flood of slowed logins from one address keeps no one else out (issue 28).
+"""A flood of slowed logins from one address keeps no one else out.
 
 The served app, real connections: 16 of them post slowed logins (fresh names, wrong passwords) from
 one address whose failures, and the admin account's, are past their slow-down limits. Meanwhile the

@@ -1,4 +1,4 @@
-"""Predictions stay right up to the image border (issue 22, "Edges"): the convex upsampling's
+"""Predictions stay right up to the image border: the convex upsampling's
 3×3 window and the predictor's padding to the size multiple must not pull the outer pixels of a
 side towards 0 (they made stripes one working-resolution pixel, 8 px for ``lite``, wide)."""
 

@@ -1,4 +1,4 @@
-"""The warp monocular corruption (issue 31, item 4): deterministic per frame, positive, of another family
+"""The warp monocular corruption: deterministic per frame, positive, of another family
 than the realistic estimator's, fooled by the scene's own illusions, and as far off once aligned."""
 
 from __future__ import annotations

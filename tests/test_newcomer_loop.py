@@ -1,5 +1,5 @@
-"""The curator→annotator loop and the run pages a newcomer tripped over (issue 33: 3, 4, 5, 7, 8, 9, 10,
-12), their service parts: frames sent back to an annotator who holds another one are named with it
+"""The curator→annotator loop and the run pages a newcomer tripped over,
+their service parts: frames sent back to an annotator who holds another one are named with it
 (and the held one keeps its lease); a rejection's note, curator and time on the sample, and a rejected
 sample and its frame's resubmission linked both ways; a cancelled run's job says cancelled and took
 the time of every attempt; an evaluation's worst and best samples never overlap; the jobs page of a

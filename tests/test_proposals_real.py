@@ -1,4 +1,4 @@
-"""plane-break on real scenes (issue 32): framed photographs composited on planar boards into the
+"""plane-break on real scenes: framed photographs composited on planar boards into the
 Middlebury Motorcycle (dataset.synthetic.composite), the calibrated score and its threshold, and the
 real-scene part of `bench proposals`. Seeds 4000+ are held out from the proposer's tuning (0–79)
 and from the benchmark's report (1000–1011)."""
@@ -82,8 +82,8 @@ def test_a_composition_is_framed_photographs_on_tilted_boards(scene) -> None:
 
 @pytest.mark.parametrize("seed", [4002, 4003])
 def test_plane_break_finds_the_pictures_on_real_boards(scene, seed: int) -> None:
-    # Before issue 32 plane-break looked for planes in the whole frame: a board among the clutter of a
-    # real room holds none of them, and 2 of 8 such pictures were found.
+    # plane-break fits each candidate's plane on a ring around it: a board among the clutter of a real room
+    # holds none of the whole frame's planes, and looking for those instead found 2 of 8 such pictures.
     frame = compose(untouched_scenes(scene)[seed % 2], seed)
     found = PlaneBreakProposer().propose(frame.left, frame.mono_disparity).items
     for region in frame.regions:

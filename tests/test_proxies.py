@@ -1,4 +1,4 @@
-"""The client's address behind trusted proxies (issue 28): X-Forwarded-For is read only from a peer in
+"""The client's address behind trusted proxies: X-Forwarded-For is read only from a peer in
 ``trusted_proxies``, right to left past trusted addresses, so a client cannot name its own address,
 and clients behind a trusted proxy are counted apart."""
 

@@ -1,4 +1,4 @@
-"""RAFT-Stereo as a baseline method (issue 29, item 5): `evaluate` takes a checkpoint per network
+"""RAFT-Stereo as a baseline method: `evaluate` takes a checkpoint per network
 method, so a fusion checkpoint and an imported RAFT-Stereo are scored in one report beside SGBM and
 mono-gt-align; launch and evaluation requests name checkpoints as `predict --checkpoint` does."""
 

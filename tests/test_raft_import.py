@@ -1,4 +1,4 @@
-"""RAFT-Stereo's published checkpoints imported and run output-identical (issue 29): for each of the
+"""RAFT-Stereo's published checkpoints imported and run output-identical: for each of the
 three published architectures, seeded full-width weights in the published files' layout
 (tests/raft_golden.py) go through `checkpoints import --from raft-stereo` and `predict --iters 32`,
 and must give what RAFT-Stereo's own code gave for them, demo-style (tests/fixtures/raft_stereo/,

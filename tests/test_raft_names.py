@@ -1,4 +1,4 @@
-"""One way to name a checkpoint (issue 29 item 2, issue 33 item 15): `RUN:NAME`, `imported:NAME`, or —
+"""One way to name a checkpoint: `RUN:NAME`, `imported:NAME`, or —
 on the command line — a path; `runs list --json` names checkpoints the way `predict --checkpoint`
 takes them; a stereo-only checkpoint predicts without a mono disparity."""
 

@@ -1,4 +1,4 @@
-"""The `raft-stereo` network (issue 29 item 1): its preset and config rules, what its options build,
+"""The `raft-stereo` network: its preset and config rules, what its options build,
 zero-padded convex upsampling, training with frozen batch norm, its memory figures, and lite/paper
 left as they were."""
 

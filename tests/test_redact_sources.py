@@ -1,4 +1,4 @@
-"""Server paths are kept out where outside text enters (issue 28, Paths): a job's log, error, parameters
+"""Server paths are kept out where outside text enters: a job's log, error, parameters
 and result, a run's end reason, a report's files; answers are not rewritten as a whole, so what people
 type reaches others as they typed it."""
 

@@ -1,4 +1,4 @@
-"""Runs end honestly (issue 20): trainer checkpoints load with ``weights_only=True`` and resume bit
+"""Runs end honestly: trainer checkpoints load with ``weights_only=True`` and resume bit
 for bit from them; non-finite weights end a run ``diverged``; absurd values are refused before any
 work; a cancelled run checkpoints the step it stopped at and resumes from it; a rank killed by a
 signal is named; DDP logs no ``find_unused_parameters`` warning."""
@@ -84,7 +84,7 @@ def test_non_finite_weights_after_a_finite_loss_end_the_run_diverged(native: Pat
 
 @pytest.mark.slow
 def test_a_run_whose_predictions_are_not_finite_ends_diverged_not_succeeded(native: Path, tmp_path: Path) -> None:
-    # lr 1e9 (issue 20): one step leaves huge but finite weights whose every prediction is NaN.
+    # lr 1e9: one step leaves huge but finite weights whose every prediction is NaN.
     run = make_run(tmp_path / "run", native, steps=1, lr=1e9)
     n_val = len(split_names(native)["val"])
     assert train_here(run) == EXIT_DIVERGED

@@ -1,4 +1,4 @@
-"""No orphan trainers (issue 20): whatever ends a run's job ends every process of the run — an
+"""No orphan trainers: whatever ends a run's job ends every process of the run — an
 exception in the handler after torchrun started, a cancel of a run whose job is gone, a SIGKILLed
 torchrun agent — and ``/proc`` shows none left. (A SIGKILLed worker: ``--watch-pid``, see
 tests/test_runs_job.py.)"""

@@ -1,4 +1,4 @@
-"""The scale paths (issue 16): keyset pages, the newest verdict kept on the frame, maintained counts
+"""The scale paths: keyset pages, the newest verdict kept on the frame, maintained counts
 and migration 0002 — checked against the queries they replace, on both databases."""
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The classical segmenter on a synthetic room's back wall with boxes standing in front of it: a
 click on the wall must not spread onto a box, and a right-click on a box that a previous mask
-leaked onto removes the whole box, its top included (issue 33, item 17).
+leaked onto removes the whole box, its top included.
 
 The ground truth comes from the renderer's own ray cast: which room face, box or wall rectangle
 the ray through each pixel centre meets first.

@@ -1,5 +1,5 @@
 """`illusion-studio synth` ends with one line saying what it made, on stderr: stdout stays the list
-of the videos' folders, one a line, for scripts (issue 33, item 13)."""
+of the videos' folders, one a line, for scripts."""
 
 from __future__ import annotations
 

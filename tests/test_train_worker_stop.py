@@ -1,5 +1,5 @@
 """A train worker stopped gracefully (SIGTERM, as a deploy does) lets its trainers checkpoint where
-they are, as a cancel does (issue 28): the run is interrupted, not lost, and a resume goes on from
+they are, as a cancel does: the run is interrupted, not lost, and a resume goes on from
 the step it stopped at; no trainer outlives the worker."""
 
 from __future__ import annotations

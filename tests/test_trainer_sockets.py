@@ -1,4 +1,4 @@
-"""A single-machine run listens on loopback only (issue 28): while a 2-process CPU run trains, every
+"""A single-machine run listens on loopback only: while a 2-process CPU run trains, every
 listening socket of its processes — the agent's store, gloo's pairs — is on 127.0.0.1 or ::1, even
 where the environment points gloo at a network interface. torchrun's own c10d store binds every
 interface; the app's launcher must not."""

@@ -1,4 +1,4 @@
-"""The model's jobs behind the trust boundary (issue 20): the web names runs, checkpoints and
+"""The model's jobs behind the trust boundary: the web names runs, checkpoints and
 registered dataset roots, never server paths; nothing a request names is unpickled; launches go
 through one typed schema with bounds the machine holds; answers carry no absolute server path."""
 
