@@ -104,11 +104,14 @@ def test_the_job_table_and_the_cli_load_without_torch() -> None:
 TRAINER_MUST_NOT_LOAD = ("sqlalchemy", "alembic", "pycocotools", "dataset.db", "dataset.models", "dataset.services")
 # ...but the exceptions every layer raises are pure and may load.
 TRAINER_MAY_LOAD = ("dataset.services", "dataset.services.errors")
+# The engine: the trainer's entry module and what its main() imports, and the network, losses, metrics,
+# prediction and evaluation every caller of the engine uses.
 TRAINER_MODULES = ("model.train.__main__", "model.train.dist", "model.train.events", "model.train.loop",
-                   "model.train.spec", "model.train.watch")  # the entry module and what its main() imports
+                   "model.train.spec", "model.train.watch", "model.network", "model.losses", "model.metrics",
+                   "model.predictor", "model.methods", "model.evaluate", "model.checkpoint", "model.presets")
 
 
-def test_the_trainer_loads_no_database_layer() -> None:
+def test_the_engine_loads_no_database_layer() -> None:
     if importlib.util.find_spec("torch") is None:
         pytest.skip("the training engine needs torch (the `models` extra)")
     # A fresh interpreter: this one may hold any of them already.
