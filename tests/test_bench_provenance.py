@@ -27,9 +27,15 @@ def _record() -> dict:
     return json.loads((BENCH / "trunk" / "trunk.json").read_text())
 
 
-def test_every_record_cites_the_committed_trunk() -> None:
-    digest = hashlib.sha256(TRUNK.read_bytes()).hexdigest()
-    assert _record()["sha256"] == digest
+def test_every_record_cites_a_committed_trunk() -> None:
+    """Each committed trunk file is the one its record names, and every benchmark JSON that starts from a
+    trunk cites one of them: the protocol-2 figures and pre-training the first, the stereo-only records theirs."""
+    committed = {}
+    for file in sorted((BENCH / "trunk").glob("*.safetensors")):
+        digest = hashlib.sha256(file.read_bytes()).hexdigest()
+        assert json.loads(file.with_suffix(".json").read_text())["sha256"] == digest, file.name
+        committed[digest] = file.name
+    assert _record()["sha256"] == hashlib.sha256(TRUNK.read_bytes()).hexdigest()
     cited = {}
     for path in sorted(BENCH.glob("fusion-*.json")):
         pretrained = json.loads(path.read_text()).get("pretrained")
@@ -37,8 +43,9 @@ def test_every_record_cites_the_committed_trunk() -> None:
             cited[path.name] = pretrained["sha256"]
     for path in sorted(BENCH.glob("pretrain-*.json")):
         cited[path.name] = json.loads(path.read_text())["trunk"]["sha256"]
-    assert len(cited) >= 7  # the six protocol-2 figures and the pre-training run
-    assert cited == dict.fromkeys(cited, digest)
+    assert len(cited) >= 9  # the six protocol-2 figures, two pre-training runs, the protocol-3 checks
+    assert {name: committed.get(digest) for name, digest in cited.items()} == {
+        name: ("trunk-stereo-only.safetensors" if "stereo-only" in name else "trunk.safetensors") for name in cited}
 
 
 def test_the_trunk_record_holds_the_config_it_trained_with() -> None:
