@@ -1,5 +1,5 @@
 """Peak memory of the real trainer (``python -m model.train``, one rank) at several crops and GRU
-iterations, the least-squares fit of ``model.fit``'s memory model to them, and that model's
+iterations, the least-squares fit of ``model.runs.capacity``'s memory model to them, and that model's
 estimate beside each measurement: how ``MEMORY_MB`` is calibrated for a (preset, device)."""
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 
 from benchmarks.workspace import synthetic_version, write_train_run
-from model.fit import coefficients
 from model.presets import load_preset
+from model.runs.capacity import coefficients
 
 # (H, W, iterations): spans the lite preset's crop (192x320, 7) to four times its work per sample.
 POINTS = ((192, 320, 4), (192, 320, 7), (320, 512, 7), (384, 640, 7), (384, 640, 14))
@@ -35,7 +35,7 @@ finally:
 
 def run_memory_bench(preset: str = "lite", points: tuple[tuple[int, int, int], ...] = POINTS) -> dict[str, Any]:
     """Measured peak MB per point, the fitted (base, MB per megapixel·iteration), and the estimate
-    that ``model.fit`` makes today for each point."""
+    that ``model.runs.capacity`` makes today for each point."""
     height = max(p[0] for p in points)
     width = max(p[1] for p in points)
     rows = []

@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parent.parent  # the repository root
 # Every source that shapes what a training run sees or does, relative to ROOT: a folder stands for
 # every ``.py`` under it. Kept explicit so that a new module that matters is added on purpose.
 TRAINING_SOURCES: tuple[str, ...] = (
-    "model",  # the network, losses, training engine, config loader, and the training job (model/jobs.py)
+    "model",  # the network, losses, training engine, config loader, and the training job (model/runs/handlers.py)
     "dataset/readers",  # how a pinned dataset version's samples are read (VersionReader) and cropped into regions
     "dataset/samples.py",  # how a sample's stored outputs (images, disparity, mono, masks) are encoded and decoded
     "dataset/media.py",  # the media store the readers load those outputs from

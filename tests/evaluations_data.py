@@ -16,8 +16,8 @@ from dataset.models import Sample, TrainingRun
 from dataset.readers.version import pin_dataset_version
 from dataset.services import jobs as job_service
 from dataset.services import training
-from model.evaluation import EvalShellOptions, evaluation_params
-from model.launch import EvaluationLaunch, validate
+from model.runs.evaluation import EvalShellOptions, evaluation_params
+from model.runs.schema import EvaluationLaunch, validate
 from tests.runs_data import DISPARITY, H, W, add_accepted_samples
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime

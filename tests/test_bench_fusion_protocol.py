@@ -22,9 +22,9 @@ from dataset.synthetic import render_video  # noqa: E402
 from dataset.synthetic.corruptions import warped_mono  # noqa: E402
 from model.align import align  # noqa: E402
 from model.checkpoint import load_network, save_checkpoint  # noqa: E402
-from model.jobs import resolve_config  # noqa: E402
 from model.network import FusionNetwork  # noqa: E402
 from model.presets import Config, load_preset  # noqa: E402
+from model.runs.handlers import resolve_config  # noqa: E402
 from webapp.cli import main  # noqa: E402
 
 NETWORKS = (fusion.FUSION, *fusion.ABLATIONS)

@@ -10,11 +10,11 @@ import pytest
 from dataset.db import migrate, transaction
 from dataset.models import Role
 from dataset.services import users as user_service
-from model import registry
 from model.checkpoint import save_checkpoint
 from model.network import FusionNetwork
 from model.presets import load_preset
 from model.raft_import import convert, strip_module
+from model.runs import registry
 from tests.browser import login, serving
 from tests.conftest import PASSWORD, make_settings
 from tests.raft_golden import fixture_state, load_fixture

@@ -14,7 +14,7 @@ from dataset.readers.base import make_regions
 from dataset.synthetic import render_video
 from model.evaluate import EvalOptions, evaluate, iter_reader, mean_over_samples
 from model.methods import build_methods
-from model.report import PredictionWriter, write_report
+from model.runs.report import PredictionWriter, write_report
 
 
 def _sample(name: str, gt: np.ndarray, masks: dict[str, np.ndarray] | None = None,

@@ -66,8 +66,8 @@ def test_fusion_predictions_bring_their_confidence(tmp_path: Path) -> None:
 
     from dataset.formats import read_pfm
     from dataset.readers import StereoSample
-    from model.evaluation import SeenSamples
-    from model.report import PredictionWriter
+    from model.runs.evaluation import SeenSamples
+    from model.runs.report import PredictionWriter
 
     image = np.zeros((4, 6, 3), np.uint8)
     sample = StereoSample(name="a/b", left=image, right=image, disparity=np.ones((4, 6), np.float32),

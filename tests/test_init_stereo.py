@@ -93,7 +93,7 @@ LITE_WIDTHS = {"n_downsample": 3, "encoder_dims": [16, 32, 48], "encoder_blocks"
 
 def test_a_launch_names_init_stereo_and_the_run_says_what_it_started_from(client, tokens, runtime) -> None:  # type: ignore[no-untyped-def]
     from dataset.db import transaction
-    from model import registry
+    from model.runs import registry
     from tests.runs_data import add_accepted_samples
     from tests.test_runs import SHORT, bearer
 

@@ -21,10 +21,10 @@ from dataset.services import training
 from dataset.services.errors import FieldError
 from dataset.settings import Settings
 from model.checkpoint import save_checkpoint
-from model.jobs import preflight
-from model.launch import RunLaunch, validate
 from model.network import FusionNetwork
 from model.presets import load_preset
+from model.runs.handlers import preflight
+from model.runs.schema import RunLaunch, validate
 from model.train import EXIT_FAILED, EXIT_SUCCEEDED
 from model.train.events import read_events
 from model.train.spec import RUN_FILE
@@ -111,8 +111,8 @@ def test_a_start_checkpoint_of_another_model_config_is_refused_at_launch(client,
 
 
 def test_an_imported_file_is_offered_with_the_presets_it_fits_and_refused_for_others(client, tokens, runtime, samples) -> None:  # type: ignore[no-untyped-def]
-    from model import registry
-    from model.start_fit import write_sidecar
+    from model.runs import registry
+    from model.runs.start_fit import write_sidecar
 
     raft = load_preset("raft-stereo")
     path = registry.imported_path(runtime.settings.home, "rs")

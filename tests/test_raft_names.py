@@ -17,10 +17,10 @@ from dataset.formats import write_rgb  # noqa: E402
 from dataset.models import TrainingRun  # noqa: E402
 from dataset.services import training  # noqa: E402
 from dataset.services.errors import InvalidInput, NotFound  # noqa: E402
-from model import registry  # noqa: E402
 from model.checkpoint import save_checkpoint  # noqa: E402
 from model.network import FusionNetwork  # noqa: E402
 from model.presets import load_preset  # noqa: E402
+from model.runs import registry  # noqa: E402
 from tests.model_pairs import random_dot_pair  # noqa: E402
 from webapp.cli import main  # noqa: E402
 

@@ -8,10 +8,10 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from model.fit import estimate_memory  # noqa: E402
 from model.losses import fusion_loss  # noqa: E402
 from model.network import FusionNetwork  # noqa: E402
 from model.presets import ALL_PRESETS, PRESETS, Config, load_preset  # noqa: E402
+from model.runs.capacity import estimate_memory  # noqa: E402
 from model.stereo.upsample import convex_upsample  # noqa: E402
 from tests.model_pairs import random_dot_pair  # noqa: E402
 
@@ -95,7 +95,7 @@ def test_zero_padded_upsampling_pulls_the_border_towards_zero_and_edge_does_not(
 
 
 # The trainer's peak MB (one rank, CPU) at (H, W, iterations), measured on the 2-core development
-# machine with `run_memory_bench("raft-stereo", …)` (/work/notes/raft.md): what model/fit.py's figures fit.
+# machine with `run_memory_bench("raft-stereo", …)` (/work/notes/raft.md): what model/runs/capacity.py's figures fit.
 MEASURED = {(128, 256, 4): 1403.7, (128, 256, 8): 1476.9, (192, 320, 8): 2261.1, (256, 384, 8): 2982.2,
             (256, 384, 12): 3287.8}
 

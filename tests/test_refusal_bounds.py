@@ -17,7 +17,7 @@ from dataset.services import training
 from dataset.services import users as user_service
 from dataset.services.errors import FieldError, InvalidInput
 from dataset.wording import SHOWN_CHARS, quoted
-from model.launch import MIN_LR, RunLaunch, validate
+from model.runs.schema import MIN_LR, RunLaunch, validate
 from tests.conftest import login
 from webapp.runtime import Runtime
 

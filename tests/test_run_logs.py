@@ -11,7 +11,7 @@ from dataset.db import transaction
 from dataset.models import TrainingRun
 from dataset.services import jobs as job_service
 from dataset.services import run_logs, training
-from model.report import picture_caption, report_html, sample_label
+from model.runs.report import picture_caption, report_html, sample_label
 from tests.test_runs import bearer
 
 ABSOLUTE = re.compile(r"(?<![\w:/.~\]-])/(?:[\w.+@-]+/)+")

@@ -13,7 +13,7 @@ from dataset.db import transaction
 from dataset.models import Job, JobState, RunState, TrainingRun
 from dataset.services import training
 from dataset.services.errors import Conflict, InvalidInput
-from model import registry
+from model.runs import registry
 from tests.runs_data import add_accepted_samples
 from webapp.cli import main
 

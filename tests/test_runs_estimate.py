@@ -9,9 +9,9 @@ import pytest
 from dataset.db import transaction
 from dataset.models import TrainingMetric, TrainingRun
 from dataset.states import RunState
-from model.launch import MAX_STEPS
 from model.presets import load_preset
-from model.run_length import Measured, Size, estimate
+from model.runs.run_length import Measured, Size, estimate
+from model.runs.schema import MAX_STEPS
 from tests.runs_data import add_accepted_samples
 from tests.test_runs import _queued_run, bearer
 

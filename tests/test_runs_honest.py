@@ -18,10 +18,10 @@ import torch
 from dataset.db import transaction
 from dataset.models import JobState, RunState, TrainingRun
 from dataset.services import training
-from model.launcher import TRAINERS_FILE, death_reason, group_members
 from model.losses import fusion_loss
 from model.network import FusionNetwork
 from model.presets import load_preset
+from model.runs.launcher import TRAINERS_FILE, death_reason, group_members
 from model.train import CANCEL_FILE, EXIT_DIVERGED, EXIT_FAILED, EXIT_SUCCEEDED
 from model.train.checkpoints import step_checkpoints, step_path
 from model.train.events import read_events

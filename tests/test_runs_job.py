@@ -15,8 +15,8 @@ from dataset.db import transaction
 from dataset.models import Job, JobState, TrainingRun
 from dataset.services import jobs as job_service
 from dataset.services import training
-from model import registry
-from model.launcher import group_members
+from model.runs import registry
+from model.runs.launcher import group_members
 from tests.runs_data import add_accepted_samples
 from tests.workers import wait_for
 from webapp.cli import main

@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from model.launcher import ProcessGroup, device_env, group_members, torchrun_command
+from model.runs.launcher import ProcessGroup, device_env, group_members, torchrun_command
 from tests.waiting import until
 
 # A leader that starts two grandchildren which ignore SIGTERM, then prints and sleeps: the worst

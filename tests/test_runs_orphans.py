@@ -21,7 +21,7 @@ from dataset.models import Job, JobState, RunState, TrainingRun
 from dataset.services import jobs as job_service
 from dataset.services import training
 from dataset.services.errors import Conflict
-from model.launcher import (
+from model.runs.launcher import (
     TRAINERS_FILE,
     ProcessGroup,
     device_env,

@@ -13,7 +13,7 @@ import pytest
 from dataset.db import transaction
 from dataset.models import Job, JobState, TrainingRun
 from dataset.services import training
-from model.launcher import TRAINERS_FILE, group_members
+from model.runs.launcher import TRAINERS_FILE, group_members
 from model.train.checkpoints import step_checkpoints
 from tests.runs_data import add_accepted_samples
 from tests.train_runs import events

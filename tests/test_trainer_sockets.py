@@ -14,7 +14,7 @@ import pytest
 
 from dataset.db import transaction
 from dataset.services import training
-from model.launcher import TRAINERS_FILE, group_members
+from model.runs.launcher import TRAINERS_FILE, group_members
 from tests.runs_data import add_accepted_samples
 from tests.train_runs import events
 from tests.waiting import until

@@ -20,8 +20,8 @@ from dataset.services import jobs as job_service
 from dataset.services import training
 from dataset.settings import Settings
 from dataset.wording import quoted
-from model import registry
 from model.checkpoint import FORMAT, UnsafeCheckpoint, load_checkpoint, upgrade_checkpoint
+from model.runs import registry
 from tests.conftest import make_settings
 from tests.test_runs import SHORT, _queued_run, write_checkpoint
 from webapp.cli import main
@@ -222,8 +222,8 @@ def test_a_crop_larger_than_the_data_is_refused_with_one_that_fits(client, token
 
 def test_the_memory_estimate_refuses_a_run_that_would_not_fit(tmp_path, samples) -> None:  # type: ignore[no-untyped-def]
     from dataset.services.errors import FieldError
-    from model.fit import check_fit, estimate_memory
     from model.presets import load_preset
+    from model.runs.capacity import check_fit, estimate_memory
 
     config = load_preset("lite", {"crop": (64, 96), "train_iters": 64})
     estimate = estimate_memory(config, nproc=2, device="cpu")

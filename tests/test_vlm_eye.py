@@ -179,7 +179,7 @@ def test_the_bench_childs_peak_memory_is_its_own() -> None:
 
 
 def test_the_memory_estimate_counts_the_eyes_weights() -> None:
-    from model.fit import frozen_weights_mb
+    from model.runs.capacity import frozen_weights_mb
 
     size_mb = package_weights_file().stat().st_size / 2**20
     assert frozen_weights_mb(load_preset("lite", {"vlm_eye": "efficientnet-lite0"})) == pytest.approx(size_mb)

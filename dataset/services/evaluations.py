@@ -1,7 +1,7 @@
 """Evaluations in the database: one row per evaluate job, and per database sample and method its
 figures, so the Samples pages can sort and filter by an evaluation's error.
 
-The job computes the report (``model.evaluation``) into the workspace's ``evaluations/<job id>``
+The job computes the report (``model.runs.evaluation``) into the workspace's ``evaluations/<job id>``
 (or, from the command line, a folder of its choice); this module stores it and reads it back, from the
 workspace's folder only.
 """
@@ -39,7 +39,7 @@ def evaluation_for_job(session: Session, job_id: int, params: dict[str, Any], us
 
 
 def dataset_label(params: dict[str, Any]) -> str:
-    """How answers name what an evaluation scores (``model.evaluation``'s parameters): a folder in a
+    """How answers name what an evaluation scores (``model.runs.evaluation``'s parameters): a folder in a
     registered root (``root:path``), a command-line folder by its name, or a run's test split."""
     data = params.get("data")
     if data is None:

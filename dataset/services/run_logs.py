@@ -2,7 +2,7 @@
 it to download. The lines are the trainers' own; the web layer rewrites server folders out of them
 (``webapp/redact.py``).
 
-``torchrun --log-dir RUN_DIR/logs`` (``model/launcher.py``) writes every rank's output to
+``torchrun --log-dir RUN_DIR/logs`` (``model/runs/launcher.py``) writes every rank's output to
 ``logs/<rendezvous id>_<random>/attempt_<n>/<local rank>/{stdout,stderr}.log``, one rendezvous
 folder per launch (a resume is a new launch). Rank 0's log is its two files of every launch,
 oldest launch first, stdout before stderr (a traceback ends its launch).

@@ -119,7 +119,7 @@ def validate_selection(selection: DataSelection) -> None:
 
 
 def validate_launch(launch: Launch) -> None:
-    """What the launch schema (``model/launch.py``) does not see: the command line's multi-node
+    """What the launch schema (``model/runs/schema.py``) does not see: the command line's multi-node
     options and the start file. Processes, devices and seeds passed the schema."""
     if not 1 <= launch.nnodes <= 1024:
         raise InvalidInput(f"nodes must be 1..1024, got {launch.nnodes}")

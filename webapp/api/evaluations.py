@@ -10,8 +10,8 @@ from flask_login import current_user
 
 from dataset.models import Role, User
 from dataset.services import evaluations
-from model.evaluation import evaluation_params
-from model.launch import EvaluationLaunch, validate
+from model.runs.evaluation import evaluation_params
+from model.runs.schema import EvaluationLaunch, validate
 from webapp.api.blueprint import api, json_body
 from webapp.auth import requires
 from webapp.redact import app_redactor
@@ -34,7 +34,7 @@ def get_evaluation(evaluation_id: int) -> ResponseReturnValue:
 @api.post("/evaluations")
 @requires(Role.curator)
 def launch_evaluation() -> ResponseReturnValue:
-    """Queue an evaluate job. Body: :class:`model.launch.EvaluationLaunch` (in the OpenAPI document)."""
+    """Queue an evaluate job. Body: :class:`model.runs.schema.EvaluationLaunch` (in the OpenAPI document)."""
     rt = runtime()
     params = evaluation_params(validate(EvaluationLaunch, json_body(), rt.settings), rt.settings, g.db)
     user = g.db.get(User, current_user.id)

@@ -6,7 +6,7 @@ from typing import Any
 
 from dataset.models import IllusionType
 from dataset.services.users import MAX_PASSWORD, MIN_PASSWORD
-from model.launch import openapi_schemas
+from model.runs.schema import openapi_schemas
 
 
 def _ref(name: str) -> dict[str, str]:
@@ -88,7 +88,7 @@ _BY_ERROR = [_q("evaluation", desc="an evaluation id: its database samples, wors
              _q("sort", "string", "error (EPE, default) or bad2"), _q("method", "string", "default: its first method"),
              _q("region", "string", "all (default) or illusion"),
              _q("min_error", "number", "only samples at or above it (EPE px, bad-2 %)")]
-# What an evaluation's report folder holds (model/report.py), as served: named types, else octet-stream.
+# What an evaluation's report folder holds (model/runs/report.py), as served: named types, else octet-stream.
 _REPORT_FILES = ("application/json", "text/csv", "text/html", "text/plain", "text/javascript", "image/png",
                  "application/octet-stream")
 # Frames sent back to the caller while it holds another: a count and the oldest few.
@@ -444,7 +444,7 @@ def openapi_document() -> dict[str, Any]:
                 "EvaluationList": _list("Evaluation"),
                 "Promote": {"type": "object", "additionalProperties": False, "properties": {"checkpoint": {
                     "type": "string", "description": "best (default), last, or a file name from the run's checkpoints"}}},
-                # The launch schemas, as the API validates them (model/launch.py).
+                # The launch schemas, as the API validates them (model/runs/schema.py).
                 **openapi_schemas(),
                 "CurrentModel": {"type": "object", "properties": {
                     "run": {"type": ["integer", "null"]}, "file": {"type": "string"}, "step": {"type": ["integer", "null"]},

@@ -11,8 +11,8 @@ from flask_login import current_user
 
 from dataset.models import Role, User
 from dataset.services import training
-from model import registry, run_length
-from model.launch import FieldError, RunLaunch, validate
+from model.runs import registry, run_length
+from model.runs.schema import FieldError, RunLaunch, validate
 from webapp.api.blueprint import api, id_list_arg, int_arg, json_body
 from webapp.auth import requires
 from webapp.jobs import runs as run_control
@@ -43,7 +43,7 @@ def list_runs() -> ResponseReturnValue:
 @api.post("/runs")
 @requires(Role.admin)
 def launch_run() -> ResponseReturnValue:
-    """Body: :class:`model.launch.RunLaunch` (published in the OpenAPI document)."""
+    """Body: :class:`model.runs.schema.RunLaunch` (published in the OpenAPI document)."""
     request_ = validate(RunLaunch, json_body(), runtime().settings)
     run = run_control.launch_request(runtime(), g.db, request_, _user())
     g.db.commit()
@@ -53,7 +53,7 @@ def launch_run() -> ResponseReturnValue:
 @api.post("/runs/estimate")
 @requires(Role.admin)
 def estimate_run() -> ResponseReturnValue:
-    """Body: :class:`model.launch.RunLaunch`, validated as a launch is (a wrong field is its 400)."""
+    """Body: :class:`model.runs.schema.RunLaunch`, validated as a launch is (a wrong field is its 400)."""
     return run_length.launch_estimate(g.db, validate(RunLaunch, json_body(), runtime().settings))
 
 

@@ -159,7 +159,7 @@ def train_benchmark(as_json: bool, steps: int) -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 def memory_benchmark(as_json: bool) -> None:
     """The lite trainer's peak memory at several crops and iterations, the memory model's fit to them,
-    and the estimate launches are checked with (model/fit.py's MEMORY_MB)."""
+    and the estimate launches are checked with (model/runs/capacity.py's MEMORY_MB)."""
     from benchmarks.memory import run_memory_bench
 
     _report(run_memory_bench(), as_json)

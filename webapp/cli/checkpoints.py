@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from model import registry
+from model.runs import registry
 from webapp.cli.errors import service_errors
 from webapp.cli.state import CliState, pass_state
 

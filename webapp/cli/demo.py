@@ -257,7 +257,7 @@ def _launch_demo_run(rt: Runtime) -> int | None:
 
 def _unfinished_demo_run(rt: Runtime) -> int | None:
     """On a later start, the demo's run if it never became the current model (the demo stopped first)."""
-    from model.registry import current_checkpoint
+    from model.runs.registry import current_checkpoint
 
     if current_checkpoint(rt.settings) is not None:
         return None
@@ -305,8 +305,8 @@ def _finish_demo_run(rt: Runtime, run_id: int, *, wait: bool = False) -> int | N
 def _launch_demo_evaluation(rt: Runtime, run_id: int, user_id: int) -> int:
     """Queue the default methods, with the current model, on the run's held-out test split; the evaluation's id."""
     from dataset.services import evaluations
-    from model.evaluation import DEFAULT_METHODS, evaluation_params
-    from model.launch import EvaluationLaunch
+    from model.runs.evaluation import DEFAULT_METHODS, evaluation_params
+    from model.runs.schema import EvaluationLaunch
 
     with transaction(rt.sessions) as s:
         params = evaluation_params(EvaluationLaunch(methods=list(DEFAULT_METHODS), run=run_id), rt.settings, s)

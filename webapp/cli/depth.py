@@ -8,7 +8,7 @@ import click
 import numpy as np
 
 from dataset.formats import FormatError, read_rgb, write_pfm
-from model import registry
+from model.runs import registry
 from webapp.cli.errors import service_errors
 from webapp.cli.state import CliState, pass_state
 

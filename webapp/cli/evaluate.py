@@ -10,12 +10,12 @@ import click
 
 from dataset.readers import READER_FORMATS
 from dataset.services.evaluations import dataset_label
-from model import registry
 from model.align import ALIGN_RULES
 from model.evaluate import RESOLUTIONS
-from model.evaluation import DEFAULT_METHODS, EvalShellOptions, evaluation_params, report_dir
-from model.launch import EvaluationLaunch, validate
 from model.methods import METHODS, method_key
+from model.runs import registry
+from model.runs.evaluation import DEFAULT_METHODS, EvalShellOptions, evaluation_params, report_dir
+from model.runs.schema import EvaluationLaunch, validate
 from webapp.cli.errors import service_errors
 from webapp.cli.running import run_job, run_options
 from webapp.cli.state import CliState, pass_state

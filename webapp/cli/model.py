@@ -9,7 +9,7 @@ import numpy as np
 
 from dataset.formats import FormatError, read_map, read_rgb, write_pfm, write_rgb
 from dataset.preview.images import add_colorbar, colorize, value_range
-from model import registry
+from model.runs import registry
 from webapp.cli.errors import service_errors
 from webapp.cli.state import CliState, pass_state
 

@@ -26,7 +26,7 @@ def runs() -> None:
 def list_runs(state: CliState, as_json: bool) -> None:
     """Every run: state, step, best validation EPE, dataset; the current model's marked."""
     from dataset.services import training
-    from model import registry
+    from model.runs import registry
 
     rt = state.runtime
     current = registry.current_model(rt.settings)

@@ -13,10 +13,10 @@ import click
 from dataset.db import transaction
 from dataset.models import IllusionType
 from dataset.services import training
-from model import registry
-from model.launch import MIN_LR, RunLaunch, backbone_dirs, validate
-from model.launcher import engine_options
 from model.presets import ALL_PRESETS, load_preset
+from model.runs import registry
+from model.runs.launcher import engine_options
+from model.runs.schema import MIN_LR, RunLaunch, backbone_dirs, validate
 from webapp.cli.errors import service_errors
 from webapp.cli.state import CliState, pass_state
 from webapp.jobs import runs as run_control

@@ -10,7 +10,7 @@ from dataset.services.jobs import Handler
 from dataset.services.prefilter import prefilter_frames
 from dataset.services.proposals import propose_job
 from dataset.services.segmentation import encode_job, propagate_job
-from model.jobs import evaluate_job, train_job
+from model.runs.handlers import evaluate_job, train_job
 
 HANDLERS: dict[str, Handler] = {
     "ingest": ingest_video,

@@ -17,12 +17,12 @@ from dataset.services import audit, training
 from dataset.services import jobs as job_rows
 from dataset.services.dataset_roots import folder_label, resolve_folder
 from dataset.services.errors import Conflict, InvalidInput, NotFound
-from model import launcher, registry
-from model.fit import check_fit, train_device
-from model.jobs import resolve_config
-from model.launch import FieldError, RunLaunch, backbone_dirs, checkpoint_text
 from model.presets import Config, ModelConfig
-from model.start_fit import check_init, check_init_stereo, imported_model
+from model.runs import launcher, registry
+from model.runs.capacity import check_fit, train_device
+from model.runs.handlers import resolve_config
+from model.runs.schema import FieldError, RunLaunch, backbone_dirs, checkpoint_text
+from model.runs.start_fit import check_init, check_init_stereo, imported_model
 from model.train.spec import with_backbones
 
 if TYPE_CHECKING:
@@ -166,7 +166,7 @@ def promote(rt: Runtime, run_id: int, which: str, user: User | None, *, path: Pa
 
 def _start_from(rt: Runtime, session: Session, name: str, *, field: str,
                 ) -> registry.CheckpointFile | registry.ResolvedCheckpoint:
-    """The checkpoint a launch body names (:func:`model.registry.resolve`'s names): a run's as its
+    """The checkpoint a launch body names (:func:`model.runs.registry.resolve`'s names): a run's as its
     file (pinned once the launch passes), an imported one as resolved; a wrong name is that field's error."""
     try:
         found = registry.resolve(rt.settings, name)

@@ -25,12 +25,12 @@ from dataset.samples import load_output
 from dataset.services import evaluations, sample_review, training
 from dataset.services.errors import NotFound
 from dataset.wording import quoted
-from model import registry
 from model.align import ALIGN_RULES
 from model.evaluate import RESOLUTIONS
-from model.evaluation import DEFAULT_METHODS
 from model.methods import METHODS
-from model.report import DEPTH_METRICS, TABLE_METRICS
+from model.runs import registry
+from model.runs.evaluation import DEFAULT_METHODS
+from model.runs.report import DEPTH_METRICS, TABLE_METRICS
 from webapp.auth import requires
 from webapp.redact import app_redactor
 from webapp.runtime import runtime

@@ -17,9 +17,9 @@ from dataset.contained import open_contained
 from dataset.models import IllusionType, Role, Video
 from dataset.readers import READER_FORMATS
 from dataset.services import run_logs, training
-from model import registry, run_length
-from model.fit import suggest_crop
 from model.presets import ALL_PRESETS, load_preset
+from model.runs import registry, run_length
+from model.runs.capacity import suggest_crop
 from webapp.api.blueprint import id_list_arg, int_arg
 from webapp.auth import requires
 from webapp.redact import app_redactor

@@ -1,5 +1,5 @@
 """Job handlers of the model: ``train`` runs the engine under torchrun and mirrors its progress;
-``evaluate`` (``model.evaluation``) writes an evaluation's report.
+``evaluate`` (``model.runs.evaluation``) writes an evaluation's report.
 
 No torch import here (the handler table loads eagerly, and torch lives in the trainers' processes).
 """
@@ -24,10 +24,10 @@ from dataset.models import Job, JobState, RunState, TrainingRun, utcnow
 from dataset.services import training
 from dataset.services.errors import FieldError, InvalidInput, ServiceError
 from dataset.services.jobs import JobContext
-from model.evaluation import evaluate_job
-from model.fit import check_worker
-from model.launch import backbone_dirs
-from model.launcher import (
+from model.presets import ALL_PRESETS, Config, load_preset
+from model.runs.capacity import check_worker
+from model.runs.evaluation import evaluate_job
+from model.runs.launcher import (
     STOP_GRACE_S,
     ProcessGroup,
     clear_stop,
@@ -39,7 +39,7 @@ from model.launcher import (
     stop_recorded,
     torchrun_command,
 )
-from model.presets import ALL_PRESETS, Config, load_preset
+from model.runs.schema import backbone_dirs
 from model.train.spec import BACKBONES, read_run, with_backbones
 
 POLL_S = 1.0

@@ -17,8 +17,8 @@ from sqlalchemy.orm import Session
 
 from dataset.models import TrainingMetric, TrainingRun
 from dataset.services.training import effective_state
-from model.launch import RunLaunch
 from model.presets import load_preset
+from model.runs.schema import RunLaunch
 
 MEASURED_RUNS = 20  # the newest finished runs of a preset looked at: older ones rarely are nearer
 

@@ -5,7 +5,7 @@ A launch names only what the app knows: a run and one of its checkpoints by name
 an admin registered plus a relative path inside it. Numbers are strict (no booleans, no strings,
 no Unicode digits) and bounded by what a machine can hold; what depends on the machine (processes,
 devices) is checked against the settings passed as validation context. What depends on the data
-and memory is checked by :mod:`model.fit` once the data is pinned.
+and memory is checked by :mod:`model.runs.capacity` once the data is pinned.
 """
 
 from __future__ import annotations
@@ -34,11 +34,11 @@ from dataset.services.errors import FieldError, InvalidInput
 from dataset.services.training import DEFAULT_SPLIT, SAMPLE_KINDS, parse_split
 from dataset.services.validate import DB_INT_MAX
 from dataset.settings import DATASET_ROOT_NAME
-from model import registry
 from model.align import ALIGN_RULES
 from model.evaluate import RESOLUTIONS
 from model.methods import METHODS, NETWORK_METHODS, method_key
 from model.presets import ALL_PRESETS, PRESETS, Config, load_preset
+from model.runs import registry
 from model.train.spec import BACKBONES
 
 MAX_STEPS = 1_000_000  # 10× the paper's 100k
@@ -72,11 +72,11 @@ class CheckpointRef(_Strict):
 
     @property
     def name(self) -> str:
-        """The same checkpoint as :func:`model.registry.resolve` names it (``3:best``)."""
+        """The same checkpoint as :func:`model.runs.registry.resolve` names it (``3:best``)."""
         return f"{self.run}:{self.checkpoint}"
 
 
-# What model.registry.resolve takes from a request (never a path): RUN:NAME or imported:NAME.
+# What model.runs.registry.resolve takes from a request (never a path): RUN:NAME or imported:NAME.
 _NAMED = r"^([1-9][0-9]{0,9}:(best|last|best\.pt|(step|best_step)_[0-9]{7,12}\.pt)|imported:[A-Za-z0-9][A-Za-z0-9._-]{0,63})$"
 _IMPORTED = r"^imported:[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
 CheckpointName = Annotated[str, Field(pattern=_NAMED, description=registry.NAME_HINT)]
@@ -86,7 +86,7 @@ Checkpoint = Annotated[Annotated[CheckpointName, Tag(_TAGS[0])] | Annotated[Chec
 
 
 def checkpoint_text(ref: Checkpoint) -> str:
-    """A checkpoint of a request as one name for :func:`model.registry.resolve`."""
+    """A checkpoint of a request as one name for :func:`model.runs.registry.resolve`."""
     return ref.name if isinstance(ref, CheckpointRef) else ref
 
 

@@ -33,7 +33,7 @@ from typing import Any
 from dataset.atomic import atomic_write_bytes
 from model.train import CANCEL_FILE
 
-PROJECT_ROOT = Path(__file__).resolve().parent.parent
+PROJECT_ROOT = Path(__file__).resolve().parents[2]
 STOP_GRACE_S = 10.0
 TRAINERS_FILE = "trainers.json"
 

@@ -270,7 +270,7 @@ def import_checkpoint(settings: Any, file: Path, *, source: str, name: str | Non
         raise InvalidInput(str(exc).splitlines()[0]) from None
     if source == "depth-anything-v2":  # a monocular model: no stereo preset to fit
         return {"checkpoint": f"{IMPORTED}:{name}", **result}
-    from model.start_fit import fitting_presets, write_sidecar
+    from model.runs.start_fit import fitting_presets, write_sidecar
 
     write_sidecar(destination, result["config"])
     return {"checkpoint": f"{IMPORTED}:{name}", **{k: v for k, v in result.items() if k != "config"},
@@ -280,7 +280,7 @@ def import_checkpoint(settings: Any, file: Path, *, source: str, name: str | Non
 def imported_fits(home: Path) -> list[dict[str, Any]]:
     """The imported checkpoints a form offers, each with the presets it fits as ``init`` and as
     ``init_stereo`` (None where its config cannot be read here): ``{"name", "init", "init_stereo"}``."""
-    from model.start_fit import describe_fits, imported_model
+    from model.runs.start_fit import describe_fits, imported_model
 
     return [{"name": f"{IMPORTED}:{n}", **describe_fits(imported_model(imported_path(Path(home), n)))}
             for n in imported_names(Path(home))]

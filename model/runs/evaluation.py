@@ -21,11 +21,11 @@ from dataset.services.dataset_roots import resolve_folder
 from dataset.services.errors import InvalidInput, NotFound
 from dataset.services.evaluations import checkpoint_label, dataset_label
 from dataset.services.jobs import JobContext
-from model import registry
 from model.evaluate import DEFAULT_THRESHOLDS, RESOLUTIONS, EvalOptions, evaluate, iter_reader
-from model.launch import EvaluationLaunch, FieldError, FolderRef, checkpoint_text
 from model.methods import NETWORK_METHODS, Mono, NetworkRuns, SgbmParams, build_methods, relative_pfm
-from model.report import PredictionWriter, ranked_samples, write_pictures, write_report
+from model.runs import registry
+from model.runs.report import PredictionWriter, ranked_samples, write_pictures, write_report
+from model.runs.schema import EvaluationLaunch, FieldError, FolderRef, checkpoint_text
 
 DEFAULT_METHODS = ("fusion", "stereo", "mono_gt_align", "sgbm")
 PICTURED = 3  # worst and best samples shown with pictures
@@ -107,7 +107,7 @@ def _method_source(request: EvaluationLaunch, method: str, settings: Any, sessio
 
 
 def _named_source(name: str, settings: Any, session: Session, field_name: str) -> dict[str, Any]:
-    """A checkpoint a request names (:func:`model.registry.resolve`): ``{"run", "file": CheckpointFile}``
+    """A checkpoint a request names (:func:`model.runs.registry.resolve`): ``{"run", "file": CheckpointFile}``
     for a run's, ``{"name", "path"}`` for an imported one (its "path" is the name too: answers show
     it, and it is no server path)."""
     try:
