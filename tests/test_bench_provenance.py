@@ -67,7 +67,7 @@ def test_the_sources_fingerprint_covers_training_and_sees_an_edit(tmp_path: Path
         assert needed in covers
     real = provenance.training_sources_fingerprint()
     assert real["covers"] == list(covers) and real["files"] == len(provenance.source_files())
-    assert ROOT / "model" / "jobs.py" in provenance.source_files()  # the training job the handlers run
+    assert ROOT / "model" / "runs" / "handlers.py" in provenance.source_files()  # the training job the handlers run
     # A copy of two covered entries: equal bytes, equal hash; one byte changed anywhere, another hash.
     for entry in ("model/presets.py", "dataset/export/splits.py"):
         (tmp_path / entry).parent.mkdir(parents=True, exist_ok=True)
