@@ -23,8 +23,8 @@ from annotation.segment import Embedding
 from benchmarks.segment import default_sam2_dir, person_click
 from benchmarks.served import served_app
 from benchmarks.workspace import approved_frame_workspace
+from core.formats import mask_to_rle, rle_to_mask
 from dataset.db import transaction
-from dataset.formats import mask_to_rle, rle_to_mask
 from dataset.models import Frame, User
 from dataset.services import segmentation
 from dataset.services import users as user_service

@@ -59,7 +59,7 @@ import model
 from benchmarks import fusion_stats as stats
 from benchmarks.provenance import provenance_block, source_commit
 from benchmarks.trunk import Trunk, compose_init, load_trunk
-from dataset.atomic import atomic_write_bytes
+from core.atomic import atomic_write_bytes
 from dataset.capture.synthetic import import_rendered_video
 from dataset.db import transaction
 from dataset.media import MediaStore

@@ -17,8 +17,8 @@ import numpy as np
 from sqlalchemy import select
 
 from benchmarks.workspace import approved_frame_workspace
+from core.geometry.benchmark import reference_plane_fit, reference_right_view
 from dataset.db import transaction
-from dataset.geometry.benchmark import reference_plane_fit, reference_right_view
 from dataset.models import Frame, Job, Sample, User
 from dataset.services import jobs as job_service
 from dataset.services import pipeline

@@ -28,7 +28,7 @@ TRAINING_SOURCES: tuple[str, ...] = (
     "dataset/readers",  # how a pinned dataset version's samples are read (VersionReader) and cropped into regions
     "dataset/samples.py",  # how a sample's stored outputs (images, disparity, mono, masks) are encoded and decoded
     "dataset/media.py",  # the media store the readers load those outputs from
-    "dataset/formats",  # the PFM / image / mask codecs the stored outputs go through
+    "core/formats",  # the PFM / image / mask codecs the stored outputs go through
     "dataset/services/training.py",  # the selection pinned, the split (parse_split, split_version) and the launch
     "dataset/export/splits.py",  # the split's arithmetic: which video lands in train or val for a seed
     "webapp/jobs/handlers.py",  # which function runs a queued "train" job

@@ -20,7 +20,7 @@ import numpy as np
 
 from annotation.segment.base import Embedding, Segmenter
 from annotation.segment.registry import make_segmenter
-from dataset.formats import mask_to_rle
+from core.formats import mask_to_rle
 
 
 def person_click(truth: np.ndarray, mask: np.ndarray | None) -> tuple[float, float, int] | None:

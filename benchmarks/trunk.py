@@ -23,7 +23,7 @@ from safetensors import SafetensorError
 from safetensors.torch import load as load_safetensors
 from safetensors.torch import save as save_safetensors
 
-from dataset.atomic import atomic_write_bytes
+from core.atomic import atomic_write_bytes
 from model.checkpoint import load_checkpoint, save_checkpoint
 from model.network import FusionNetwork
 from model.presets import Config

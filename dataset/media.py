@@ -14,7 +14,7 @@ import tempfile
 from pathlib import Path
 from typing import BinaryIO
 
-from dataset.atomic import atomic_write_bytes
+from core.atomic import atomic_write_bytes
 
 _KEY = re.compile(r"^[0-9a-f]{2}/[0-9a-f]{2}/[0-9a-f]{64}\.[a-z0-9]{1,8}$")
 _EXT = re.compile(r"^[a-z0-9]{1,8}$")

@@ -23,7 +23,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from dataset.formats import decode_pfm, encode_pfm
+from core.formats import decode_pfm, encode_pfm
 from dataset.media import MediaStore
 
 IMAGES = ("left", "right")

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from dataset.geometry import RegionMasks, psnr, rectify_disparity, stereo_consistency, synthesize_right_view
+from core.geometry import RegionMasks, psnr, rectify_disparity, stereo_consistency, synthesize_right_view
 from dataset.synthetic import render_video
 
 

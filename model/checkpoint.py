@@ -20,7 +20,7 @@ import numpy as np
 import torch
 from numpy._core import multiarray as numpy_multiarray
 
-from dataset.atomic import atomic_write_bytes
+from core.atomic import atomic_write_bytes
 from model.network import FusionNetwork
 from model.presets import Config
 

@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from dataset.formats import read_pfm
-from dataset.geometry.consistency import sgbm_disparity
+from core.formats import read_pfm
+from core.geometry.consistency import sgbm_disparity
 from dataset.readers import SampleError, StereoSample
 from dataset.readers.base import resize_disparity, resize_image
 from model.align import AlignRule, align

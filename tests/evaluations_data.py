@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from dataset.atomic import atomic_write_bytes
+from core.atomic import atomic_write_bytes
+from core.formats import write_pfm
 from dataset.db import transaction
-from dataset.formats import write_pfm
 from dataset.models import Sample, TrainingRun
 from dataset.readers.version import pin_dataset_version
 from dataset.services import jobs as job_service

@@ -12,8 +12,8 @@ from pycocotools import mask as coco_mask
 from scipy import ndimage
 from sqlalchemy import select, update
 
+from core.formats import mask_to_rle
 from dataset.db import transaction
-from dataset.formats import mask_to_rle
 from dataset.models import Annotation, AuditEntry, Frame, FrameState, Job
 from dataset.services import jobs as job_service
 from tests.conftest import PASSWORD

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from sqlalchemy import update
 
+from core.formats import mask_to_rle, rle_to_mask
 from dataset.db import migrate, transaction
-from dataset.formats import mask_to_rle, rle_to_mask
 from dataset.models import Frame, FrameState
 from dataset.services import jobs as job_service
 from dataset.services.ingest import ingest_params

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from sqlalchemy import select
 
+from core.formats import mask_to_rle
 from dataset.db import migrate, transaction
-from dataset.formats import mask_to_rle
 from dataset.models import (
     Annotation,
     Frame,

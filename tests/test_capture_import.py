@@ -20,6 +20,8 @@ import pytest
 from click.testing import CliRunner
 from sqlalchemy import func, select
 
+from core.formats import write_pfm, write_rgb
+from core.geometry import backproject
 from dataset.capture import (
     CAPTURE_JOB,
     RECONSTRUCTION_JOB,
@@ -31,8 +33,6 @@ from dataset.capture import (
 )
 from dataset.capture import capture_import as capture_module
 from dataset.db import transaction
-from dataset.formats import write_pfm, write_rgb
-from dataset.geometry import backproject
 from dataset.models import Frame, Job, JobState, Sample, Video
 from dataset.samples import load_output, load_outputs
 from dataset.services import jobs as job_service

@@ -24,7 +24,7 @@ from annotation.depth.depth_anything_import import (  # noqa: E402
     infer_architecture,
     to_transformers,
 )
-from dataset.formats import read_pfm, read_rgb  # noqa: E402
+from core.formats import read_pfm, read_rgb  # noqa: E402
 from tests.depth_anything_golden import fixture_state, load_fixture  # noqa: E402
 from webapp.cli import main  # noqa: E402
 

@@ -16,9 +16,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pycocotools import mask as coco_mask
 
+from core.formats import FormatError, rle_to_mask
+from core.formats.rle import MAX_PIXELS, compact_list_counts
 from dataset.db import transaction
-from dataset.formats import FormatError, rle_to_mask
-from dataset.formats.rle import MAX_PIXELS, compact_list_counts
 from dataset.models import Frame, FrameState, SourceKind, Video
 from dataset.services.annotate import DRAFT_VALUES, MAX_REGIONS
 from webapp.api.blueprint import too_many_values

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dataset.formats import read_pfm, write_kitti_disparity, write_pfm, write_rgb
+from core.formats import read_pfm, write_kitti_disparity, write_pfm, write_rgb
 from dataset.readers import SampleError, StereoSample, open_reader
 from dataset.readers.base import make_regions
 from dataset.synthetic import render_video

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from click.testing import CliRunner
 
-from dataset.formats import read_kitti_disparity, write_pfm
+from core.formats import read_kitti_disparity, write_pfm
 from tests.test_evaluate import _write_kitti
 from webapp.cli import main
 
@@ -64,7 +64,7 @@ def test_fusion_predictions_bring_their_confidence(tmp_path: Path) -> None:
 
     import numpy as np
 
-    from dataset.formats import read_pfm
+    from core.formats import read_pfm
     from dataset.readers import StereoSample
     from model.runs.evaluation import SeenSamples
     from model.runs.report import PredictionWriter

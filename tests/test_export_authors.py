@@ -13,8 +13,8 @@ import pytest
 from click.testing import CliRunner
 from sqlalchemy import select
 
+from core.formats import read_pfm, write_pfm
 from dataset.export import HANDLERS as EXPORT_HANDLERS
-from dataset.formats import read_pfm, write_pfm
 from dataset.models import Annotation, Frame, JobState, Sample, SourceKind, Video
 from dataset.samples import load_outputs
 from tests.fixtures.workspaces import counts, export, import_, tree

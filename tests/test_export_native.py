@@ -17,8 +17,8 @@ from click.testing import CliRunner
 from pycocotools.coco import COCO
 from sqlalchemy import select
 
+from core.formats import read_mask
 from dataset.export import LayoutError, export_params, parse_split_spec, split_of
-from dataset.formats import read_mask
 from dataset.models import Job, JobState
 from tests.fixtures.workspaces import SEED, SPLIT, counts, export, import_, run_job, tree
 from webapp.cli import main

@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from dataset.formats import (
+from core.formats import (
     FormatError,
     disparity_point_cloud,
     read_authors_disparity,
@@ -27,7 +27,7 @@ from dataset.formats import (
     write_ply,
     write_scale_factors,
 )
-from dataset.formats.masks import cv_mask
+from core.formats.masks import cv_mask
 
 
 @pytest.mark.parametrize("little_endian", [True, False])

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from pycocotools import mask as coco_mask
 
-from dataset.formats import FormatError, mask_to_rle, rle_to_mask
+from core.formats import FormatError, mask_to_rle, rle_to_mask
 
 # pycocotools 2.0.11 calls np.array(copy=False) on an object without __array__(copy=...)
 

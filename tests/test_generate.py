@@ -113,7 +113,7 @@ def test_failures_are_readable_and_leave_the_annotation_intact(runtime: Runtime,
 
 
 def test_a_tiny_illusion_is_skipped_and_flagged(runtime: Runtime, tmp_path: Path) -> None:
-    from dataset.formats import mask_to_rle
+    from core.formats import mask_to_rle
 
     prepare(runtime, tmp_path, n_frames=1, annotate=False)
     tiny = np.zeros((H, W), bool)

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from dataset.formats import read_map, read_mask, write_map, write_mask, write_rgb
-from dataset.geometry import RigCalibration, save_calibration
+from core.formats import read_map, read_mask, write_map, write_mask, write_rgb
+from core.geometry import RigCalibration, save_calibration
 from webapp.cli.bench import bench
 from webapp.cli.geometry import geometry
 from webapp.cli.state import CliState

@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from dataset.geometry import InputError, sgbm_disparity, stereo_consistency
+from core.geometry import InputError, sgbm_disparity, stereo_consistency
 
 H, W = 96, 160
 

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from dataset.geometry import DegenerateSupportError, InputError, fit_plane_ransac
+from core.geometry import DegenerateSupportError, InputError, fit_plane_ransac
 
 
 def _plane_points(rng: np.random.Generator, n: int, outliers: float, noise: float = 0.0) -> tuple[np.ndarray, np.ndarray]:

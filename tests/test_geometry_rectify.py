@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dataset.geometry import (
+from core.geometry import (
     DegenerateSupportError,
     InputError,
     RegionMasks,

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from dataset.geometry import (
+from core.geometry import (
     CalibrationError,
     InputError,
     depth_to_disparity,

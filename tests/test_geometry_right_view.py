@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from dataset.geometry import (
+from core.geometry import (
     InpaintError,
     InputError,
     ScaleSearchError,
@@ -15,8 +15,8 @@ from dataset.geometry import (
     search_disparity_scale,
     synthesize_right_view,
 )
-from dataset.geometry.benchmark import reference_scale, reference_splat
-from dataset.geometry.right_view import MAX_DISPARITY_FRACTION
+from core.geometry.benchmark import reference_scale, reference_splat
+from core.geometry.right_view import MAX_DISPARITY_FRACTION
 from dataset.synthetic import render_video
 
 

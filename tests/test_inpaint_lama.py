@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from annotation.inpaint import Inpainter, InpainterError, make_inpainter
-from dataset.geometry import InpaintError, inpaint_holes, synthesize_right_view
+from core.geometry import InpaintError, inpaint_holes, synthesize_right_view
 from dataset.services.inpaint import HOLE_FILLERS, hole_filler
 
 torch = pytest.importorskip("torch")

@@ -1,10 +1,11 @@
 """The one-way house: what each package may import (DESIGN.md, docs/architecture.md).
 
-``model`` may import ``dataset`` and ``annotation``; ``annotation`` imports only
-``dataset.formats``, ``dataset.filecache``, ``dataset.atomic`` and ``dataset.geometry``; nothing imports ``webapp`` but
-``webapp`` and ``benchmarks`` (a harness that drives the served app), and nothing imports ``benchmarks`` but the CLI's
-``bench`` command; ``dataset`` never imports ``model`` or ``webapp``; ``dataset.geometry`` imports no
-Flask, database or torch. Every import counts, also those inside functions.
+``core`` (formats, geometry, atomic writes, the file cache) imports none of the project's other packages,
+nor Flask, the database or torch; ``annotation`` imports only ``core`` of them (so ``dataset`` and
+``annotation`` no longer import each other in a loop); ``model`` may import ``dataset`` and
+``annotation``; nothing imports ``webapp`` but ``webapp`` and ``benchmarks`` (a harness that drives the
+served app), and nothing imports ``benchmarks`` but the CLI's ``bench`` command; ``dataset`` never imports
+``model`` or ``webapp``. Every import counts, also those inside functions.
 """
 
 from __future__ import annotations
@@ -18,10 +19,9 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("annotation", "dataset", "model", "webapp", "benchmarks")
-# dataset.geometry is pure numpy/OpenCV (its own test below): the plane-break proposer fits planes with it.
-ANNOTATION_MAY_USE = ("dataset.formats", "dataset.filecache", "dataset.atomic", "dataset.geometry")
-GEOMETRY_MUST_NOT_USE = ("flask", "flask_login", "sqlalchemy", "alembic", "torch", "transformers")
+PACKAGES = ("annotation", "core", "dataset", "model", "webapp", "benchmarks")
+CORE_MUST_NOT_USE = ("annotation", "dataset", "model", "webapp", "benchmarks", "flask", "flask_login", "sqlalchemy",
+                     "alembic", "torch", "transformers")
 
 
 def _imports() -> list[tuple[str, str]]:
@@ -69,9 +69,8 @@ def test_dataset_never_imports_model_or_webapp() -> None:
     assert _violations(lambda a, b: _within(a, ("dataset",)) and _within(b, ("model", "webapp"))) == []
 
 
-def test_annotation_imports_only_the_formats_the_file_cache_and_atomic_writes() -> None:
-    assert _violations(lambda a, b: _within(a, ("annotation",)) and _within(b, ("dataset", "model", "webapp"))
-                       and not _within(b, ANNOTATION_MAY_USE)) == []
+def test_annotation_imports_only_core_of_the_projects_packages() -> None:
+    assert _violations(lambda a, b: _within(a, ("annotation",)) and _within(b, ("dataset", "model", "webapp"))) == []
 
 
 def test_model_imports_dataset_and_annotation_but_not_webapp() -> None:
@@ -84,10 +83,10 @@ def test_the_engine_never_imports_the_runs_around_it() -> None:
                        and _within(b, ("model.runs",))) == []
 
 
-def test_the_geometry_core_imports_no_flask_database_or_torch() -> None:
-    assert _violations(lambda a, b: _within(a, ("dataset.geometry",)) and _within(b, GEOMETRY_MUST_NOT_USE)) == []
+def test_core_imports_nothing_above_it_nor_flask_database_or_torch() -> None:
+    assert _violations(lambda a, b: _within(a, ("core",)) and _within(b, CORE_MUST_NOT_USE)) == []
     # …nor anything that does: a fresh interpreter, since this process may hold torch already.
-    code = ("import sys, dataset.geometry; "
+    code = ("import sys, core.geometry, core.formats, core.filecache, core.atomic; "
             "heavy = sorted(m for m in ('torch', 'flask', 'sqlalchemy') if m in sys.modules); "
             "assert not heavy, heavy")
     result = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)

@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.formats import write_pfm
 from dataset.contained import contained_file, open_contained, storage_root
 from dataset.db import transaction
-from dataset.formats import write_pfm
 from dataset.models import Evaluation, EvaluationResult, Job, JobState, TrainingRun
 from dataset.services import evaluations, run_logs, training
 from dataset.services import jobs as job_service

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from sqlalchemy import select
 
+from core.formats import FormatError, mask_to_rle, rle_to_mask
 from dataset.db import transaction
-from dataset.formats import FormatError, mask_to_rle, rle_to_mask
 from dataset.models import Annotation, Frame, FrameState, Sample, SampleState
 from dataset.services import users as user_service
 from dataset.services.validate import REASON_CHARS

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from dataset.atomic import atomic_write_bytes
+from core.atomic import atomic_write_bytes
 from dataset.media import MediaKeyError, MediaStore
 
 

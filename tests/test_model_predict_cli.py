@@ -1,5 +1,5 @@
 """``illusion-studio predict`` on a random-dot pair with a lite checkpoint: PFMs that
-dataset/formats reads back, the preview PNG, and one-line errors."""
+core/formats reads back, the preview PNG, and one-line errors."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from click.testing import CliRunner
 
 torch = pytest.importorskip("torch")
 
-from dataset.formats import read_pfm, read_rgb, write_pfm, write_rgb  # noqa: E402
+from core.formats import read_pfm, read_rgb, write_pfm, write_rgb  # noqa: E402
 from model.checkpoint import save_checkpoint  # noqa: E402
 from model.network import FusionNetwork  # noqa: E402
 from model.presets import load_preset  # noqa: E402

@@ -13,7 +13,7 @@ torch = pytest.importorskip("torch")
 pytest.importorskip("transformers")
 
 from annotation.depth import make_depth_backend  # noqa: E402
-from dataset.formats import read_pfm, read_rgb, write_rgb  # noqa: E402
+from core.formats import read_pfm, read_rgb, write_rgb  # noqa: E402
 from dataset.settings import write_settings_file  # noqa: E402
 from model.checkpoint import save_checkpoint  # noqa: E402
 from model.network import FusionNetwork  # noqa: E402

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from sqlalchemy import select
 
+from core.formats import mask_to_rle, rle_to_mask
 from dataset.db import transaction
-from dataset.formats import mask_to_rle, rle_to_mask
 from dataset.models import Frame, FrameState, Job, Proposal, ProposalScan
 from dataset.services import jobs as job_service
 from tests.fixtures.annotate import H, W

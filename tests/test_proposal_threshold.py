@@ -13,8 +13,8 @@ import pytest
 from sqlalchemy import select, update
 
 from annotation.proposals.plane_break import DEFAULT_THRESHOLD, SCORE_FLOOR
+from core.formats import rle_to_mask
 from dataset.db import migrate, transaction
-from dataset.formats import rle_to_mask
 from dataset.models import Proposal, ProposalScan
 from dataset.services import jobs as job_service
 from dataset.services.proposals import configured_proposers

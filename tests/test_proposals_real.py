@@ -14,7 +14,7 @@ from annotation.proposals import make_proposers
 from annotation.proposals.base import mask_iou
 from annotation.proposals.plane_break import DEFAULT_THRESHOLD, SCORE_FLOOR, Evidence, PlaneBreakProposer, score
 from benchmarks.proposals import _Looks, composite_frames, real_scenes, sweep
-from dataset.formats import write_pfm, write_rgb
+from core.formats import write_pfm, write_rgb
 from dataset.synthetic.composite import (
     DEPICTED_RATIO,
     FRAME_PX,

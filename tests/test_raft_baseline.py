@@ -13,7 +13,7 @@ from click.testing import CliRunner
 
 torch = pytest.importorskip("torch")
 
-from dataset.formats import read_kitti_disparity, write_pfm  # noqa: E402
+from core.formats import read_kitti_disparity, write_pfm  # noqa: E402
 from dataset.services.errors import FieldError  # noqa: E402
 from model.checkpoint import save_checkpoint  # noqa: E402
 from model.fusion import GlobalFusion  # noqa: E402

@@ -16,7 +16,7 @@ from click.testing import CliRunner
 
 torch = pytest.importorskip("torch")
 
-from dataset.formats import read_pfm, write_rgb  # noqa: E402
+from core.formats import read_pfm, write_rgb  # noqa: E402
 from model.checkpoint import load_checkpoint  # noqa: E402
 from model.raft_import import Flags, NotRaftStereo, convert, infer_architecture, strip_module  # noqa: E402
 from tests.raft_golden import fixture_state, load_fixture  # noqa: E402

@@ -12,8 +12,8 @@ from click.testing import CliRunner
 
 torch = pytest.importorskip("torch")
 
+from core.formats import write_rgb  # noqa: E402
 from dataset.db import transaction  # noqa: E402
-from dataset.formats import write_rgb  # noqa: E402
 from dataset.models import TrainingRun  # noqa: E402
 from dataset.services import training  # noqa: E402
 from dataset.services.errors import InvalidInput, NotFound  # noqa: E402

@@ -9,8 +9,8 @@ import cv2
 import numpy as np
 import pytest
 
+from core.formats import write_kitti_disparity, write_mask, write_pfm, write_png, write_rgb
 from dataset.export.errors import LayoutError
-from dataset.formats import write_kitti_disparity, write_mask, write_pfm, write_png, write_rgb
 from dataset.readers import READER_FORMATS, Camera, SampleError, StereoSample, open_reader, resize_sample
 from dataset.readers.base import make_regions, resize_disparity
 from tests.fixtures.workspaces import SEED, SPLIT, export

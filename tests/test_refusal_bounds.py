@@ -9,14 +9,14 @@ import re
 
 import pytest
 
+from core.formats import FormatError, rle_to_mask
+from core.wording import SHOWN_CHARS, quoted
 from dataset.db import transaction
 from dataset.export import parse_split_spec
-from dataset.formats import FormatError, rle_to_mask
 from dataset.services import exports as export_service
 from dataset.services import training
 from dataset.services import users as user_service
 from dataset.services.errors import FieldError, InvalidInput
-from dataset.wording import SHOWN_CHARS, quoted
 from model.runs.schema import MIN_LR, RunLaunch, validate
 from tests.conftest import login
 from webapp.runtime import Runtime

@@ -9,9 +9,9 @@ import pytest
 import torch
 from torch.utils.data import DataLoader
 
+from core.formats import read_mask, read_pfm, read_rgb
 from dataset.export import LayoutError
 from dataset.export.torch_dataset import IllusionStereoDataset
-from dataset.formats import read_mask, read_pfm, read_rgb
 from tests.fixtures.workspaces import SEED, SPLIT, export
 from webapp.runtime import Runtime
 

@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from core.wording import quoted
 from dataset.db import transaction
 from dataset.models import Job, TrainingRun
 from dataset.services import jobs as job_service
 from dataset.services import training
 from dataset.settings import Settings
-from dataset.wording import quoted
 from model.checkpoint import FORMAT, UnsafeCheckpoint, load_checkpoint, upgrade_checkpoint
 from model.runs import registry
 from tests.conftest import make_settings

@@ -29,7 +29,7 @@ pytestmark = pytest.mark.slow
 
 ROOT = Path(__file__).resolve().parent.parent
 # What the sdist is made from: the build configuration, the packages and static/ (MANIFEST.in).
-SOURCES = ("pyproject.toml", "setup.py", "MANIFEST.in", "README.md", "annotation", "dataset", "model", "webapp",
+SOURCES = ("pyproject.toml", "setup.py", "MANIFEST.in", "README.md", "annotation", "core", "dataset", "model", "webapp",
            "benchmarks", "static")
 PASSWORD = "wheel-test-pass"
 

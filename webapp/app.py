@@ -11,12 +11,12 @@ from flask_wtf.csrf import CSRFError
 from werkzeug.exceptions import HTTPException
 from werkzeug.routing import IntegerConverter, Map
 
-from dataset.atomic import atomic_write_bytes
+from core.atomic import atomic_write_bytes
+from core.wording import plural
 from dataset.services.errors import ServiceError
 from dataset.services.media_gc import clean_incoming
 from dataset.services.validate import DB_INT_MAX
 from dataset.settings import Settings
-from dataset.wording import plural
 from webapp.auth import init_auth, is_api_request, json_error
 from webapp.bodies import init_body_limits
 from webapp.headers import init_headers

@@ -2,7 +2,7 @@
 unknown affine map, larger = nearer).
 
 Backends: ``precomputed`` (embedded default, no weights: disparities stored with the frames,
-read by :func:`dataset.formats.read_map`) and ``depth-anything-v2`` (transformers, local checkpoint).
+read by :func:`core.formats.read_map`) and ``depth-anything-v2`` (transformers, local checkpoint).
 """
 
 from annotation.depth.base import DepthBackend, DepthError, check_image

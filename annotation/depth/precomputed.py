@@ -1,6 +1,6 @@
 """The backend that stands for disparities computed elsewhere and stored with a frame.
 
-Those disparities are read at import time by :func:`dataset.formats.read_map` (``.pfm``,
+Those disparities are read at import time by :func:`core.formats.read_map` (``.pfm``,
 ``.npy``, or the authors' ``.png`` with ``png="authors"``).
 """
 

@@ -1,7 +1,7 @@
 """Model-backed hole filling for synthesized right views.
 
 Backends: ``lama`` (a TorchScript LaMa export such as ``big-lama.pt``, local file). The
-classical methods (OpenCV Telea / Navier–Stokes) are in :mod:`dataset.geometry.inpaint`, which
+classical methods (OpenCV Telea / Navier–Stokes) are in :mod:`core.geometry.inpaint`, which
 takes a backend's ``inpaint`` as its hole filler.
 """
 

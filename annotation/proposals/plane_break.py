@@ -51,7 +51,7 @@ import cv2
 import numpy as np
 
 from annotation.proposals.base import Proposal, Proposals, check_frame, mask_iou, quad_mask, suppress_overlaps
-from dataset.geometry import DegenerateSupportError, fit_plane_ransac
+from core.geometry import DegenerateSupportError, fit_plane_ransac
 
 SURROUND_FRACTION = 0.02  # Gaussian sigma of a pixel's surroundings, of the image width
 MIN_AREA_FRACTION = 0.002  # of the image, smallest proposal

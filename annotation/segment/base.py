@@ -15,7 +15,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from annotation.images import rgb_image
-from dataset.formats.masks import cv_mask
+from core.formats.masks import cv_mask
 
 Box = tuple[float, float, float, float]  # (x0, y0, x1, y1), full-resolution pixels
 Progress = Callable[[float], None]  # called with the fraction done, 0..1

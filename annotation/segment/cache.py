@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from annotation.segment.base import Embedding, Segmenter, SegmentError
-from dataset.filecache import BoundedFileCache
+from core.filecache import BoundedFileCache
 
 _SHA256 = re.compile(r"^[0-9a-f]{64}$")
 _SUFFIX = ".emb"

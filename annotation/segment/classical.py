@@ -51,7 +51,7 @@ from annotation.segment.base import (
 )
 from annotation.segment.propagate import flow_propagate
 from annotation.segment.refine import disk, resize_mask, snap_to_edges
-from dataset.formats.masks import cv_mask
+from core.formats.masks import cv_mask
 
 WORK_LONG_SIDE = 800  # px; thin frames (a few px at 1280 wide) must survive the downscale
 _BLUR_SIGMA = 1.0  # working px; damps texture before the gradient

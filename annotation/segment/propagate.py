@@ -14,7 +14,7 @@ import numpy as np
 
 from annotation.segment.base import Progress
 from annotation.segment.refine import snap_to_edges
-from dataset.formats.masks import cv_mask
+from core.formats.masks import cv_mask
 
 FLOW_LONG_SIDE = 640  # px at which the flow is computed
 _SNAP_BAND = 1.5  # flow-resolution px the edge snap may move the boundary

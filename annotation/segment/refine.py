@@ -6,7 +6,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from dataset.formats.masks import cv_mask
+from core.formats.masks import cv_mask
 
 
 def disk(radius: int) -> np.ndarray:

@@ -37,7 +37,7 @@ from annotation.segment.base import (
     check_prompt,
 )
 from annotation.segment.propagate import flow_propagate
-from dataset.formats.masks import cv_mask
+from core.formats.masks import cv_mask
 
 _IMAGENET_MEAN = (0.485, 0.456, 0.406)
 _IMAGENET_STD = (0.229, 0.224, 0.225)

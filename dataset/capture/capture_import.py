@@ -20,12 +20,13 @@ import cv2
 import numpy as np
 from sqlalchemy import delete, select
 
+from core.formats import FormatError, read_image, read_rgb
+from core.geometry import CalibrationError, GeometryError, RigCalibration, load_calibration
+from core.wording import plural
 from dataset.capture.errors import CaptureError
 from dataset.capture.layout import CaptureFrame, scan_capture
 from dataset.capture.truth import DEFAULT_DEPTH_RANGE_M, DEFAULT_EPSILON_M, capture_truth
 from dataset.db import transaction
-from dataset.formats import FormatError, read_image, read_rgb
-from dataset.geometry import CalibrationError, GeometryError, RigCalibration, load_calibration
 from dataset.ingest import dhash
 from dataset.media import sha256_file
 from dataset.models import Frame, FrameState, Sample, SourceKind, Video, utcnow
@@ -33,7 +34,6 @@ from dataset.samples import mask_name, store_outputs
 from dataset.services.jobs import JobContext
 from dataset.thumbnails import put_thumbnail
 from dataset.version import code_version
-from dataset.wording import plural
 
 CAPTURE_JOB = "import_capture"
 

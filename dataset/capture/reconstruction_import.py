@@ -27,16 +27,16 @@ import numpy as np
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from core.formats import FormatError, read_map, read_rgb
+from core.wording import plural
 from dataset.capture.errors import CaptureError
 from dataset.capture.files import files_by_stem, matched_stems, names, trailing_number
 from dataset.capture.layout import IMAGE_SUFFIXES
 from dataset.db import transaction
-from dataset.formats import FormatError, read_map, read_rgb
 from dataset.models import Frame, Video
 from dataset.samples import store_outputs
 from dataset.services.errors import NotFound
 from dataset.services.jobs import JobContext
-from dataset.wording import plural
 
 RECONSTRUCTION_JOB = "import_reconstruction"
 MATCH_MODES = ("index", "order")

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from dataset.geometry import RigCalibration, backproject, depth_to_disparity, reproject_depth
+from core.geometry import RigCalibration, backproject, depth_to_disparity, reproject_depth
 
 # The authors' evaluation range for the L515's ground truth (metres).
 DEFAULT_DEPTH_RANGE_M = (0.3, 5.0)
@@ -46,7 +46,7 @@ def capture_truth(left: np.ndarray, depth_raw: np.ndarray, calibration: RigCalib
 
     ``depth_range`` (near, far) in metres, exclusive; ``epsilon``: Algorithm 3's backward
     reprojection threshold in metres. The left image guides the filter over filled holes.
-    Raises :class:`~dataset.geometry.InputError` for a depth frame without any return.
+    Raises :class:`~core.geometry.InputError` for a depth frame without any return.
     """
     cal = calibration
     depth = reproject_depth(depth_raw, cal.K_depth, cal.depth_scale, cal.R, cal.T, cal.K_color, cal.color_shape,

@@ -16,6 +16,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from core.formats import AUTHORS_FACTOR, write_authors_disparity, write_scale_factors
 from dataset.export.authors_layout import (
     DEPTH,
     LEFT,
@@ -34,7 +35,6 @@ from dataset.export.coco import parse_mask_name
 from dataset.export.errors import LayoutError
 from dataset.export.records import Progress, SampleRecord
 from dataset.export.staging import copy_file, write_bytes
-from dataset.formats import AUTHORS_FACTOR, write_authors_disparity, write_scale_factors
 from dataset.media import MediaStore
 from dataset.samples import load_output
 

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from core.formats import AUTHORS_FACTOR, FormatError, read_authors_disparity, read_mask, read_pfm, read_scale_factors
 from dataset.export.authors_layout import (
     DEPTH,
     FRAME_STEM,
@@ -34,7 +35,6 @@ from dataset.export.authors_layout import (
 from dataset.export.errors import LayoutError
 from dataset.export.probe import check_shape, raster_shape
 from dataset.export.records import PendingSample, Progress, SampleRecord, VideoInfo
-from dataset.formats import AUTHORS_FACTOR, FormatError, read_authors_disparity, read_mask, read_pfm, read_scale_factors
 from dataset.media import MediaStore
 from dataset.samples import mask_name, store_outputs
 

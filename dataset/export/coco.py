@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from core.formats import mask_to_rle
 from dataset.export.records import SampleRecord
-from dataset.formats import mask_to_rle
 from dataset.models import IllusionType, RegionKind
 from dataset.samples import mask_name
 

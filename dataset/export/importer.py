@@ -13,9 +13,9 @@ from typing import Literal
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from core.formats import mask_to_rle
 from dataset.export.coco import pair_type, parse_mask_name
 from dataset.export.records import SampleRecord
-from dataset.formats import mask_to_rle
 from dataset.media import MediaStore
 from dataset.models import (
     Annotation,

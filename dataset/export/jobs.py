@@ -7,6 +7,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from core.wording import plural
 from dataset.db import transaction
 from dataset.export.authors_export import export_authors
 from dataset.export.authors_import import read_authors
@@ -19,7 +20,6 @@ from dataset.export.selection import DEFAULT_STATES, parse_states, select_sample
 from dataset.export.splits import DEFAULT_SPLIT, format_split_spec, parse_split_spec
 from dataset.export.staging import check_target, staged_dir
 from dataset.services.jobs import Handler, JobContext
-from dataset.wording import plural
 
 FORMATS = ("native", "authors")
 

@@ -7,8 +7,8 @@ from pathlib import Path
 
 from PIL import Image
 
+from core.formats import FormatError, decode_pfm
 from dataset.export.errors import LayoutError
-from dataset.formats import FormatError, decode_pfm
 
 
 def raster_shape(data: bytes, path: Path) -> tuple[int, int, int]:

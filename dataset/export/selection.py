@@ -16,10 +16,10 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from core.wording import quoted
 from dataset.export.errors import LayoutError
 from dataset.export.records import SampleRecord, VideoInfo
 from dataset.models import Annotation, Frame, Sample, SampleState, Video
-from dataset.wording import quoted
 
 DEFAULT_STATES = ("accepted",)
 

@@ -13,8 +13,8 @@ import hashlib
 import math
 import re
 
+from core.wording import quoted
 from dataset.export.errors import LayoutError
-from dataset.wording import quoted
 
 SPLIT_NAME = re.compile(r"^[a-z0-9][a-z0-9_-]{0,31}$")
 DEFAULT_SPLIT = "train=1"

@@ -12,7 +12,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from dataset.filecache import BoundedFileCache
+from core.filecache import BoundedFileCache
 
 
 class RenderCache(BoundedFileCache):

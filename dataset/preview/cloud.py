@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dataset.geometry.camera import backproject, disparity_to_depth
+from core.geometry.camera import backproject, disparity_to_depth
 
 HIGHLIGHT_RGB = (255, 0, 255)  # magenta: a colour no natural wall has, and apart from the TURBO maps
 HIGHLIGHT_ALPHA = 0.55

@@ -10,7 +10,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from dataset.formats.masks import cv_mask
+from core.formats.masks import cv_mask
 from dataset.preview.cloud import HIGHLIGHT_RGB
 
 COLORMAP = cv2.COLORMAP_TURBO

@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
+from core.formats import read_mask, read_pfm, read_rgb
 from dataset.export.authors_import import TESTING_ROOTS, load_testing_index, testing_files
 from dataset.export.authors_layout import TESTING, TESTING_INDEX
-from dataset.formats import read_mask, read_pfm, read_rgb
 from dataset.readers.base import ListedReader, StereoSample, invalidate, make_regions, not_layout, optional_camera, require_dir
 
 AUTHORS_FX, AUTHORS_BASELINE, AUTHORS_DEPTH_RANGE = 1450.4127, 0.0628167, (0.3, 5.0)  # px, m, m

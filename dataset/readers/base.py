@@ -15,9 +15,9 @@ from typing import Any, Protocol, runtime_checkable
 import cv2
 import numpy as np
 
+from core.formats import FormatError
+from core.geometry.camera import disparity_to_depth
 from dataset.export.errors import LayoutError
-from dataset.formats import FormatError
-from dataset.geometry.camera import disparity_to_depth
 
 
 class SampleError(LayoutError):

@@ -20,7 +20,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from dataset.formats import read_image, read_map, read_mask, read_rgb
+from core.formats import read_image, read_map, read_mask, read_rgb
 from dataset.readers.base import ListedReader, StereoSample, invalidate, make_regions, not_layout, optional_camera, require_dir
 
 EXPECTED = "train/balanced/<scene>/{camera_00,camera_02}/im*.png with disp_00.npy and mask_cat.png"

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dataset.formats import read_kitti_disparity, read_rgb
+from core.formats import read_kitti_disparity, read_rgb
 from dataset.readers.base import ListedReader, StereoSample, make_regions, not_layout, optional_camera, require_dir
 
 EXPECTED = "training/{image_2,image_3,disp_occ_0}/<id>_10.png"

@@ -15,7 +15,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from dataset.formats import read_mask, read_pfm, read_rgb
+from core.formats import read_mask, read_pfm, read_rgb
 from dataset.readers.base import Camera, ListedReader, StereoSample, make_regions, not_layout, require_dir
 
 EXPECTED = "training{F,H,Q}/<scene>/{im0.png,im1.png,disp0GT.pfm,calib.txt} or <scene>-perfect/{im0.png,im1.png,disp0.pfm}"

@@ -14,9 +14,9 @@ from typing import Any
 
 import numpy as np
 
+from core.formats import read_mask, read_pfm, read_rgb
 from dataset.export.errors import LayoutError
 from dataset.export.manifest import manifest_file, read_manifest
-from dataset.formats import read_mask, read_pfm, read_rgb
 from dataset.readers.base import Camera, ListedReader, StereoSample, invalidate, make_regions
 
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-from dataset.formats import read_pfm, read_rgb
+from core.formats import read_pfm, read_rgb
 from dataset.readers.base import ListedReader, StereoSample, make_regions, not_layout, optional_camera, require_dir
 
 EXPECTED = "[<subset>/]frames_cleanpass|frames_finalpass/…/left/*.png with disparity/…/left/*.pfm"

@@ -15,8 +15,9 @@ from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 from sqlalchemy import delete, select, update
 from sqlalchemy.orm import Session
 
-from dataset.formats import FormatError
-from dataset.formats.rle import canonical_rle
+from core.formats import FormatError
+from core.formats.rle import canonical_rle
+from core.wording import quoted
 from dataset.models import Annotation, Frame, FrameState, IllusionType, Region, RegionKind, User, utcnow
 from dataset.services import audit, proposals
 from dataset.services.errors import Conflict, InvalidInput, NotFound
@@ -24,7 +25,6 @@ from dataset.services.frames import get_frame, update_frame
 from dataset.services.leases import ensure_annotation_row, held_by_other, release_lease, renew_lease
 from dataset.services.sample_review import returned_note, returned_waiting
 from dataset.services.validate import DB_INT_MAX, db_int
-from dataset.wording import quoted
 
 ANNOTATABLE = (FrameState.approved,)
 DELETE_REASONS = ("redundant", "imperceptible")

@@ -10,8 +10,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from pathlib import Path, PurePosixPath
 
+from core.wording import quoted
 from dataset.services.errors import InvalidInput
-from dataset.wording import quoted
 
 
 def folder_label(root: str, path: str = "") -> str:

@@ -10,7 +10,7 @@ from __future__ import annotations
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from dataset.formats import mask_to_rle
+from core.formats import mask_to_rle
 from dataset.media import MediaStore
 from dataset.models import Frame, FrameState, Sample, SampleState, User, Video
 from dataset.samples import load_output

@@ -15,13 +15,13 @@ from typing import Any, BinaryIO
 from sqlalchemy import delete, func, select
 from sqlalchemy.orm import Session
 
+from core.wording import quoted
 from dataset.contained import REPORTS, contained_file, open_contained, owned_folder
 from dataset.models import Evaluation, EvaluationResult, Frame, Sample, User, Video
 from dataset.redact import shown
 from dataset.services.dataset_roots import folder_label
 from dataset.services.errors import InvalidInput, NotFound
 from dataset.services.sample_review import sample_json
-from dataset.wording import quoted
 
 SORT_REGIONS = ("all", "illusion")  # the regions with indexed columns
 SORT_METRICS = ("epe", "bad2")

@@ -20,6 +20,7 @@ from typing import Any
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
+from core.wording import plural
 from dataset.contained import owned_folder
 from dataset.export import FORMATS, LayoutError, export_params, parse_split_spec
 from dataset.export.authors_layout import MASK_FORMATS
@@ -30,7 +31,6 @@ from dataset.redact import shown
 from dataset.services import audit
 from dataset.services.errors import Conflict, FieldError, NotFound
 from dataset.settings import Settings
-from dataset.wording import plural
 
 # Files that are compressed already: stored as they are, the rest deflated.
 PACKED_SUFFIXES = frozenset({".png", ".jpg", ".jpeg"})

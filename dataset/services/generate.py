@@ -19,10 +19,8 @@ import numpy as np
 from sqlalchemy import select
 
 from annotation.inpaint import InpainterError
-from dataset.db import transaction
-from dataset.finite import finite_json
-from dataset.formats import rle_to_mask
-from dataset.geometry import (
+from core.formats import rle_to_mask
+from core.geometry import (
     GeometryError,
     RegionMasks,
     psnr,
@@ -30,6 +28,8 @@ from dataset.geometry import (
     stereo_consistency,
     synthesize_right_view,
 )
+from dataset.db import transaction
+from dataset.finite import finite_json
 from dataset.media import MediaStore
 from dataset.models import Annotation, Frame, FrameState, RegionKind, Sample, SampleState, Video, utcnow
 from dataset.samples import load_output, mask_name, store_outputs

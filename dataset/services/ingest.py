@@ -18,9 +18,10 @@ import cv2
 import numpy as np
 from sqlalchemy import delete, func, select
 
+from core.formats import FormatError, read_map
+from core.wording import plural, quoted
 from dataset.capture.files import trailing_number
 from dataset.db import transaction
-from dataset.formats import FormatError, read_map
 from dataset.ingest import DecodedFrame, IngestError, dhash, hamming, open_source
 from dataset.models import Frame, IllusionType, SourceKind, Video
 from dataset.samples import store_outputs
@@ -29,7 +30,6 @@ from dataset.services.jobs import JobContext
 from dataset.services.prefilter import launch_prefilter
 from dataset.services.scene_groups import join_scene_group
 from dataset.thumbnails import put_thumbnail
-from dataset.wording import plural, quoted
 
 DEFAULT_FPS = 2.0  # the paper's sampling rate
 DEFAULT_DEDUP_HAMMING = 4

@@ -1,12 +1,12 @@
-"""The configured hole filling as :func:`dataset.geometry.synthesize_right_view` takes it."""
+"""The configured hole filling as :func:`core.geometry.synthesize_right_view` takes it."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 from annotation.inpaint import INPAINT_BACKENDS, make_inpainter
-from dataset.geometry import INPAINT_METHODS, HoleFiller, InpaintMethod
-from dataset.geometry.inpaint import check_method
+from core.geometry import INPAINT_METHODS, HoleFiller, InpaintMethod
+from core.geometry.inpaint import check_method
 
 # Every configurable ``inpaint_backend``: the geometry's own methods, then the model-backed ones.
 HOLE_FILLERS: tuple[str, ...] = INPAINT_METHODS + INPAINT_BACKENDS

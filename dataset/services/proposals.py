@@ -31,8 +31,8 @@ from sqlalchemy.orm import Session
 from annotation.proposals import Proposer, make_proposers
 from annotation.proposals.base import ProposalError, mask_iou
 from annotation.proposals.plane_break import SCORE_FLOOR
+from core.formats import mask_to_rle, rle_to_mask
 from dataset.db import transaction
-from dataset.formats import mask_to_rle, rle_to_mask
 from dataset.models import (
     Annotation,
     Frame,

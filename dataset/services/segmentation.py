@@ -17,8 +17,8 @@ from sqlalchemy.orm import Session
 
 from annotation.segment import Embedding, EmbeddingCache, Segmenter, SegmentError, make_segmenter
 from annotation.segment.cache import cached_embedding
+from core.formats import FormatError, mask_to_rle, rle_to_mask
 from dataset.db import transaction
-from dataset.formats import FormatError, mask_to_rle, rle_to_mask
 from dataset.media import MediaStore
 from dataset.models import Annotation, Frame, FrameState, Job, JobState, Region, RegionKind, utcnow
 from dataset.services.errors import InvalidInput

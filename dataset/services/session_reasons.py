@@ -11,8 +11,8 @@ from datetime import datetime, timedelta
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from core.wording import plural
 from dataset.models import AuditEntry, User, utcnow
-from dataset.wording import plural
 
 # The account changes that end every session of their user (dataset/services/users.py), and what
 # each one means for its user.

@@ -22,7 +22,8 @@ from typing import Any
 from sqlalchemy import and_, func, or_, select
 from sqlalchemy.orm import Session
 
-from dataset.atomic import atomic_write_bytes
+from core.atomic import atomic_write_bytes
+from core.wording import quoted
 from dataset.contained import LinkedFolder, owned_folder
 from dataset.export.splits import MIN_FRACTION, parse_split_spec, split_of
 from dataset.media import MediaStore
@@ -33,7 +34,6 @@ from dataset.redact import shown
 from dataset.run_layout import INIT_FILE
 from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
-from dataset.wording import quoted
 
 SPLITS = ("train", "val", "test")
 DEFAULT_SPLIT = "train=0.8,val=0.1,test=0.1"

@@ -19,7 +19,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from dataset.atomic import atomic_write_bytes
+from core.atomic import atomic_write_bytes
 from dataset.synthetic.defects import DEFECT_FRAMES, spoil_last_frames
 from dataset.synthetic.mono import FrameAffine, MonoModel
 from dataset.synthetic.records import RegionPair, SyntheticFrame, SyntheticVideo

@@ -11,9 +11,9 @@ from typing import Any
 import numpy as np
 from sqlalchemy.orm import Session
 
+from core.formats import read_pfm
 from dataset.contained import storage_root
 from dataset.db import transaction
-from dataset.formats import read_pfm
 from dataset.readers import StereoSample, open_reader, resize_sample
 from dataset.readers.version import VersionReader
 from dataset.services import evaluations, training

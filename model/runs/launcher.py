@@ -30,7 +30,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from dataset.atomic import atomic_write_bytes
+from core.atomic import atomic_write_bytes
 from model.train import CANCEL_FILE
 
 PROJECT_ROOT = Path(__file__).resolve().parents[2]

@@ -30,7 +30,7 @@ from typing import Any, BinaryIO
 
 from sqlalchemy.orm import Session
 
-from dataset.atomic import atomic_write_bytes
+from core.atomic import atomic_write_bytes
 from dataset.contained import LinkedFolder, open_contained
 from dataset.services import training
 from dataset.services.errors import Conflict, InvalidInput, NotFound

@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from dataset.atomic import atomic_write_bytes
-from dataset.formats import encode_pfm, write_kitti_disparity, write_png
+from core.atomic import atomic_write_bytes
+from core.formats import encode_pfm, write_kitti_disparity, write_png
 from dataset.preview.images import colorize, colorize_error, value_range
 from dataset.readers import StereoSample
 from model.methods import prediction_path

@@ -48,7 +48,7 @@ def fitting_presets(model: ModelConfig) -> dict[str, list[str]]:
 
 def write_sidecar(checkpoint: Path, config: Config) -> None:
     """Record ``config`` beside an imported checkpoint, for launches and forms that hold no torch."""
-    from dataset.atomic import atomic_write_bytes
+    from core.atomic import atomic_write_bytes
 
     atomic_write_bytes(Path(checkpoint).with_suffix(SIDECAR), json.dumps({"config": config.to_dict()}).encode())
 

@@ -31,7 +31,7 @@ import torch
 from torch import nn
 from torch.nn.parallel import DistributedDataParallel
 
-from dataset.atomic import atomic_write_bytes
+from core.atomic import atomic_write_bytes
 from dataset.run_layout import INIT_FILE
 from model.checkpoint import load_checkpoint, load_fitting, load_network, save_checkpoint
 from model.data import open_split, training_loader

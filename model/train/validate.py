@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from dataset.atomic import atomic_write_bytes
+from core.atomic import atomic_write_bytes
 from dataset.preview.images import encode_png
 from dataset.readers import Reader
 from model.metrics import disparity_metrics

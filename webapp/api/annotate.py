@@ -6,7 +6,7 @@ from flask import g
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
-from dataset.formats import FormatError, mask_to_rle, rle_to_mask
+from core.formats import FormatError, mask_to_rle, rle_to_mask
 from dataset.models import Frame, RegionKind, Role, User
 from dataset.services import annotate, leases, pipeline, proposals, sample_blockers, sample_review, segmentation
 from dataset.services import jobs as job_service

@@ -9,10 +9,10 @@ from typing import Any, TypeVar
 
 from flask import Blueprint, g, request
 
-from dataset.formats.rle import compact_list_counts
+from core.formats.rle import compact_list_counts
+from core.wording import quoted
 from dataset.services.errors import InvalidInput, NotFound
 from dataset.services.validate import DB_INT_MAX
-from dataset.wording import quoted
 
 api = Blueprint("api", __name__)
 _ID = re.compile(r"[0-9]{1,10}")

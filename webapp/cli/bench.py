@@ -8,7 +8,7 @@ from typing import Any
 
 import click
 
-from dataset.geometry.benchmark import run_geometry_benchmark
+from core.geometry.benchmark import run_geometry_benchmark
 from dataset.readers import READER_FORMATS, LayoutError
 from dataset.settings import drop_settings_environment
 

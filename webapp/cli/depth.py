@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from dataset.formats import FormatError, read_rgb, write_pfm
+from core.formats import FormatError, read_rgb, write_pfm
 from model.runs import registry
 from webapp.cli.errors import service_errors
 from webapp.cli.state import CliState, pass_state

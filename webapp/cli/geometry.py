@@ -15,7 +15,7 @@ import click
 import numpy as np
 
 from annotation.inpaint import InpainterError
-from dataset.formats import (
+from core.formats import (
     FormatError,
     read_image,
     read_map,
@@ -25,7 +25,7 @@ from dataset.formats import (
     write_mask,
     write_rgb,
 )
-from dataset.geometry import (
+from core.geometry import (
     GeometryError,
     InputError,
     RegionMasks,
@@ -142,7 +142,7 @@ def rectify(
 
 @geometry.command("reproject")
 @click.argument("depth", type=_FILE)
-@click.option("--calib", required=True, type=_FILE, help="Rig calibration JSON (see dataset.geometry.calibration).")
+@click.option("--calib", required=True, type=_FILE, help="Rig calibration JSON (see core.geometry.calibration).")
 @click.option("--out", required=True, type=_OUT, help="Depth in metres to write (.pfm or .npy).")
 @click.option("--image", type=_FILE, default=None, help="Colour image guiding the hole filter.")
 @click.option("--disparity", "disparity_out", type=_OUT, default=None, help="Also write disparity B·f/Z.")

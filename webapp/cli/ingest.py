@@ -10,6 +10,7 @@ from typing import Any
 
 import click
 
+from core.wording import plural
 from dataset.db import transaction
 from dataset.ingest import IngestError, find_sources
 from dataset.ingest.sources import SCENE_FILE
@@ -17,7 +18,6 @@ from dataset.models import FrameState, IllusionType, Job, SourceKind, Video
 from dataset.services.frames import list_frames
 from dataset.services.ingest import DEFAULT_DEDUP_HAMMING, DEFAULT_FPS, ingest_params
 from dataset.services.sample_blockers import sample_blocker
-from dataset.wording import plural
 from webapp.cli.errors import service_errors
 from webapp.cli.state import CliState, pass_state
 

@@ -90,8 +90,8 @@ def retry(state: CliState, job_id: int) -> None:
 def retry_generates(state: CliState) -> None:
     """Queue again the failed generate jobs whose frames can become samples now (their cause fixed: a depth
     model configured, the video's depth imported); say why the others still cannot."""
+    from core.wording import plural
     from dataset.services.sample_blockers import retry_failed_generates
-    from dataset.wording import plural
 
     rt = state.runtime
     with service_errors(), transaction(rt.sessions) as s:

@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from dataset.formats import FormatError, read_map, read_rgb, write_pfm, write_rgb
+from core.formats import FormatError, read_map, read_rgb, write_pfm, write_rgb
 from dataset.preview.images import add_colorbar, colorize, value_range
 from model.runs import registry
 from webapp.cli.errors import service_errors

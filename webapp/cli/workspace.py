@@ -9,9 +9,9 @@ from typing import TYPE_CHECKING
 
 import click
 
+from core.wording import plural
 from dataset.db import migrate
 from dataset.settings import Settings, SettingsError, load_settings
-from dataset.wording import plural
 from webapp.cli.state import CliState, pass_state
 from webapp.runtime import Runtime
 

@@ -14,10 +14,10 @@ from flask.typing import ResponseReturnValue
 from flask_login import current_user
 from sqlalchemy import select
 
+from core.wording import plural
 from dataset.models import Role, User
 from dataset.services import users as user_service
 from dataset.services.errors import ServiceError
-from dataset.wording import plural
 from webapp.api.blueprint import get_or_404
 from webapp.auth import requires
 from webapp.forms import CreateUserForm

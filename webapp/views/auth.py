@@ -11,10 +11,10 @@ from flask_login import current_user
 from markupsafe import escape
 from sqlalchemy import select
 
+from core.wording import plural
 from dataset.models import Role, utcnow
 from dataset.services import users as user_service
 from dataset.services.session_reasons import why_session_ended
-from dataset.wording import plural
 from webapp.auth import public, requires, sign_in, sign_out
 from webapp.forms import LoginForm
 from webapp.runtime import runtime

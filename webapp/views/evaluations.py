@@ -15,7 +15,8 @@ import numpy as np
 from flask import Blueprint, abort, g, render_template, request, send_file
 from flask.typing import ResponseReturnValue
 
-from dataset.formats import decode_pfm
+from core.formats import decode_pfm
+from core.wording import quoted
 from dataset.models import Evaluation, Role, Sample
 from dataset.preview.evaluation_maps import EVALUATION_IMAGES, evaluation_image
 from dataset.preview.images import encode_png
@@ -24,7 +25,6 @@ from dataset.readers.base import resize_disparity
 from dataset.samples import load_output
 from dataset.services import evaluations, sample_review, training
 from dataset.services.errors import NotFound
-from dataset.wording import quoted
 from model.align import ALIGN_RULES
 from model.evaluate import RESOLUTIONS
 from model.methods import METHODS

@@ -15,6 +15,7 @@ from flask.typing import ResponseReturnValue
 from flask_login import current_user
 from werkzeug.datastructures import MultiDict
 
+from core.wording import quoted
 from dataset.export import FORMATS
 from dataset.export.authors_layout import MASK_FORMATS
 from dataset.export.selection import DEFAULT_STATES
@@ -23,7 +24,6 @@ from dataset.models import Role, SampleState, User, Video
 from dataset.services import exports
 from dataset.services.errors import Conflict, FieldError
 from dataset.services.validate import DB_INT_MAX
-from dataset.wording import quoted
 from webapp.auth import requires
 from webapp.runtime import runtime
 

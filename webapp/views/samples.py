@@ -15,13 +15,13 @@ from flask import Blueprint, abort, g, redirect, render_template, request, send_
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
+from core.wording import quoted
 from dataset.models import Frame, Role, SampleState
 from dataset.preview import images, qa
 from dataset.preview.cache import RenderCache
 from dataset.preview.sample_preview import STAGES, SamplePreview
 from dataset.services import evaluations, sample_review
 from dataset.services.validate import REASON_CHARS
-from dataset.wording import quoted
 from webapp.auth import requires
 from webapp.runtime import runtime
 

@@ -11,9 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dataset.geometry import checks
-from dataset.geometry.errors import InputError, ScaleSearchError
-from dataset.geometry.inpaint import HoleFiller, InpaintMethod, check_method, inpaint_holes
+from core.geometry import checks
+from core.geometry.errors import InputError, ScaleSearchError
+from core.geometry.inpaint import HoleFiller, InpaintMethod, check_method, inpaint_holes
 
 # Algorithm 2 searches s in (0, W / (4·max d)]: scaled disparities stay under a quarter width.
 MAX_DISPARITY_FRACTION = 0.25

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dataset.geometry.errors import InputError
+from core.geometry.errors import InputError
 
 
 def float_map(array: np.ndarray, name: str, *, allow_nan: bool = True) -> np.ndarray:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dataset.geometry import checks
+from core.geometry import checks
 
 
 def depth_to_disparity(depth: np.ndarray, baseline: float, focal: float) -> np.ndarray:

@@ -18,10 +18,10 @@ from typing import Any
 import cv2
 import numpy as np
 
-from dataset.geometry.inpaint import inpaint_holes
-from dataset.geometry.plane import fit_plane_ransac
-from dataset.geometry.reproject import reproject_depth
-from dataset.geometry.right_view import forward_warp, search_disparity_scale, synthesize_right_view
+from core.geometry.inpaint import inpaint_holes
+from core.geometry.plane import fit_plane_ransac
+from core.geometry.reproject import reproject_depth
+from core.geometry.right_view import forward_warp, search_disparity_scale, synthesize_right_view
 
 FULL_HD = (1080, 1920)
 PLANE_POINTS = 1_000_000

@@ -14,10 +14,10 @@ from typing import Literal, Protocol
 import cv2
 import numpy as np
 
-from dataset.geometry import checks
-from dataset.geometry.errors import DegenerateSupportError, GeometryError, InputError
-from dataset.geometry.filters import guided_filter
-from dataset.geometry.plane import fit_plane_ransac
+from core.geometry import checks
+from core.geometry.errors import DegenerateSupportError, GeometryError, InputError
+from core.geometry.filters import guided_filter
+from core.geometry.plane import fit_plane_ransac
 
 
 class UnreliableSupportError(GeometryError):

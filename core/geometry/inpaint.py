@@ -12,8 +12,8 @@ from typing import Literal, get_args
 import cv2
 import numpy as np
 
-from dataset.geometry import checks
-from dataset.geometry.errors import InpaintError
+from core.geometry import checks
+from core.geometry.errors import InpaintError
 
 InpaintMethod = Literal["telea", "ns", "none"]
 INPAINT_METHODS: tuple[str, ...] = get_args(InpaintMethod)

@@ -7,7 +7,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from dataset.formats.errors import FormatError
+from core.formats.errors import FormatError
 
 
 def read_bytes(path: str | Path) -> bytes:

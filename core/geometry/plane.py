@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dataset.geometry.errors import DegenerateSupportError, InputError
+from core.geometry.errors import DegenerateSupportError, InputError
 
 # Hypotheses are scored on this many points, like the paper's per-iteration sub-sample M:
 # scoring 1000 hypotheses on all of 1M points would be 1e9 distance evaluations.

@@ -14,15 +14,15 @@ from typing import Literal
 
 import numpy as np
 
-from dataset.formats.disparity_png import (
+from core.formats.disparity_png import (
     AUTHORS_FACTOR,
     decode_authors_disparity,
     decode_kitti_disparity,
     write_kitti_disparity,
 )
-from dataset.formats.errors import FormatError
-from dataset.formats.images import read_bytes
-from dataset.formats.pfm import decode_pfm, write_pfm
+from core.formats.errors import FormatError
+from core.formats.images import read_bytes
+from core.formats.pfm import decode_pfm, write_pfm
 
 MAP_SUFFIXES = (".pfm", ".npy", ".png")
 PngEncoding = Literal["kitti", "authors"]

@@ -1,10 +1,10 @@
 """The geometry core: pure numpy/OpenCV functions for plane fitting, rectification,
 right-view synthesis and depth reprojection (no Flask, DB or torch imports)."""
 
-from dataset.geometry.calibration import RigCalibration, load_calibration, parse_calibration, save_calibration
-from dataset.geometry.camera import backproject, depth_to_disparity, disparity_to_depth
-from dataset.geometry.consistency import Consistency, psnr, sgbm_disparity, stereo_consistency
-from dataset.geometry.errors import (
+from core.geometry.calibration import RigCalibration, load_calibration, parse_calibration, save_calibration
+from core.geometry.camera import backproject, depth_to_disparity, disparity_to_depth
+from core.geometry.consistency import Consistency, psnr, sgbm_disparity, stereo_consistency
+from core.geometry.errors import (
     CalibrationError,
     DegenerateSupportError,
     GeometryError,
@@ -12,10 +12,10 @@ from dataset.geometry.errors import (
     InputError,
     ScaleSearchError,
 )
-from dataset.geometry.filters import guided_filter
-from dataset.geometry.inpaint import INPAINT_METHODS, HoleFiller, InpaintMethod, inpaint_holes
-from dataset.geometry.plane import PlaneFit, fit_plane_ransac
-from dataset.geometry.rectify import (
+from core.geometry.filters import guided_filter
+from core.geometry.inpaint import INPAINT_METHODS, HoleFiller, InpaintMethod, inpaint_holes
+from core.geometry.plane import PlaneFit, fit_plane_ransac
+from core.geometry.rectify import (
     MaskPair,
     PairReport,
     Rectified,
@@ -24,8 +24,8 @@ from dataset.geometry.rectify import (
     rectify_disparity,
     ring_mask,
 )
-from dataset.geometry.reproject import reproject_depth
-from dataset.geometry.right_view import RightView, forward_warp, search_disparity_scale, synthesize_right_view
+from core.geometry.reproject import reproject_depth
+from core.geometry.right_view import RightView, forward_warp, search_disparity_scale, synthesize_right_view
 
 __all__ = [
     "INPAINT_METHODS",

@@ -1,7 +1,7 @@
 """File formats: PFM, 16-bit PNG disparity (KITTI ×256, authors' ×16 + scale CSV), lossless
 PNG masks, COCO RLE masks, PLY point clouds, and suffix-dispatched float maps."""
 
-from dataset.formats.disparity_png import (
+from core.formats.disparity_png import (
     AUTHORS_FACTOR,
     KITTI_FACTOR,
     decode_authors_disparity,
@@ -13,13 +13,13 @@ from dataset.formats.disparity_png import (
     write_kitti_disparity,
     write_scale_factors,
 )
-from dataset.formats.errors import FormatError
-from dataset.formats.float_maps import MAP_SUFFIXES, PNG_ENCODINGS, PngEncoding, decode_npy, read_map, write_map
-from dataset.formats.images import decode_image, read_bytes, read_image, read_rgb, write_png, write_rgb
-from dataset.formats.masks import read_mask, write_mask
-from dataset.formats.pfm import decode_pfm, encode_pfm, read_pfm, write_pfm
-from dataset.formats.ply import disparity_point_cloud, read_ply, write_ply
-from dataset.formats.rle import mask_to_rle, rle_to_mask
+from core.formats.errors import FormatError
+from core.formats.float_maps import MAP_SUFFIXES, PNG_ENCODINGS, PngEncoding, decode_npy, read_map, write_map
+from core.formats.images import decode_image, read_bytes, read_image, read_rgb, write_png, write_rgb
+from core.formats.masks import read_mask, write_mask
+from core.formats.pfm import decode_pfm, encode_pfm, read_pfm, write_pfm
+from core.formats.ply import disparity_point_cloud, read_ply, write_ply
+from core.formats.rle import mask_to_rle, rle_to_mask
 
 __all__ = [
     "AUTHORS_FACTOR",

@@ -7,8 +7,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from dataset.formats.errors import FormatError
-from dataset.formats.images import read_image, write_png
+from core.formats.errors import FormatError
+from core.formats.images import read_image, write_png
 
 
 def cv_mask(mask: np.ndarray, dtype: type = np.uint8) -> np.ndarray:

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from dataset.formats.errors import FormatError
-from dataset.geometry.camera import backproject, disparity_to_depth
+from core.formats.errors import FormatError
+from core.geometry.camera import backproject, disparity_to_depth
 
 _VERTEX = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("red", "u1"), ("green", "u1"), ("blue", "u1")])
 _XYZ = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4")])

@@ -12,7 +12,7 @@ import os
 import time
 from pathlib import Path
 
-from dataset.atomic import atomic_write_bytes
+from core.atomic import atomic_write_bytes
 
 STALE_TMP_S = 3600.0  # a temporary file this old belongs to a writer that died
 

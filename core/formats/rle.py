@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from dataset.formats.errors import FormatError
-from dataset.wording import quoted
+from core.formats.errors import FormatError
+from core.wording import quoted
 
 MAX_PIXELS = 1 << 28  # refuse to allocate more for one decoded mask (16k x 16k)
 # A valid run is at most MAX_PIXELS, and its delta against the run two before fits 30 bits with the
@@ -269,7 +269,7 @@ def _characters(values: np.ndarray) -> bytes:
 
 
 def _coco() -> ModuleType:
-    """pycocotools' mask codec, imported on first use: most users of ``dataset.formats`` (the
+    """pycocotools' mask codec, imported on first use: most users of ``core.formats`` (the
     trainer among them) never touch an RLE, and need not load it."""
     from pycocotools import mask
 

@@ -10,9 +10,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from dataset.geometry import checks
-from dataset.geometry.errors import InputError
-from dataset.geometry.filters import guided_filter
+from core.geometry import checks
+from core.geometry.errors import InputError
+from core.geometry.filters import guided_filter
 
 # Algorithm 3's guided-filter settings for the filled holes, and the inpainting radius.
 _FILTER_RADIUS = 5

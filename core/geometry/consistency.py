@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from dataset.geometry import checks
-from dataset.geometry.errors import InputError
+from core.geometry import checks
+from core.geometry.errors import InputError
 
 # Above this width the matcher runs at half resolution: 4x less work, and the QA figure only
 # has to tell good pairs from broken ones.

@@ -13,8 +13,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from dataset.formats.errors import FormatError
-from dataset.formats.images import decode_image, read_bytes, write_png
+from core.formats.errors import FormatError
+from core.formats.images import decode_image, read_bytes, write_png
 
 KITTI_FACTOR = 256
 AUTHORS_FACTOR = 16

@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from dataset.geometry import checks
-from dataset.geometry.errors import CalibrationError, InputError
+from core.geometry import checks
+from core.geometry.errors import CalibrationError, InputError
 
 _TOP_KEYS = {"depth_camera", "color_camera", "R", "T", "baseline", "depth_scale"}
 _CAMERA_KEYS = {"K", "width", "height"}

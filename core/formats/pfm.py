@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from dataset.formats.errors import FormatError
-from dataset.formats.images import read_bytes
+from core.formats.errors import FormatError
+from core.formats.images import read_bytes
 
 # Magic, width, height and scale, each followed by whitespace; the data starts one byte later.
 _HEADER = re.compile(rb"\A(P[Ff])\s+(\d+)\s+(\d+)\s+([-+0-9.eE]+)\s")
