@@ -25,10 +25,10 @@ from benchmarks.served import served_app
 from benchmarks.workspace import approved_frame_workspace
 from core.formats import mask_to_rle, rle_to_mask
 from dataset.db import transaction
-from dataset.models import Frame, User
 from dataset.services import segmentation
 from dataset.services import users as user_service
 from dataset.synthetic import write_synthetic_dataset
+from dataset.tables import Frame, User
 from webapp.runtime import Runtime
 
 

@@ -63,7 +63,6 @@ from core.atomic import atomic_write_bytes
 from dataset.capture.synthetic import import_rendered_video
 from dataset.db import transaction
 from dataset.media import MediaStore
-from dataset.models import Frame, FrameState, Job, JobState, Role, RunState, Sample, SampleState, TrainingRun, User, Video
 from dataset.readers import StereoSample
 from dataset.readers.base import make_regions
 from dataset.readers.version import VersionReader, pin_dataset_version
@@ -79,6 +78,7 @@ from dataset.synthetic import SyntheticVideo, render_video, write_synthetic_data
 from dataset.synthetic.corruptions import warped_mono
 from dataset.synthetic.io import FORMAT as SYNTHETIC_FORMAT
 from dataset.synthetic.mono import realistic_mono, sample_mono_model
+from dataset.tables import Frame, FrameState, Job, JobState, Role, RunState, Sample, SampleState, TrainingRun, User, Video
 from model.evaluate import EvalOptions, sample_metrics
 from model.methods import Predict, build_methods
 from model.presets import load_preset

@@ -19,12 +19,12 @@ from sqlalchemy import select
 from benchmarks.workspace import approved_frame_workspace
 from core.geometry.benchmark import reference_plane_fit, reference_right_view
 from dataset.db import transaction
-from dataset.models import Frame, Job, Sample, User
 from dataset.services import jobs as job_service
 from dataset.services import pipeline
 from dataset.services.annotate import save_annotation
 from dataset.services.demo import true_regions
 from dataset.synthetic import read_video, write_synthetic_dataset
+from dataset.tables import Frame, Job, Sample, User
 from webapp.jobs.handlers import HANDLERS
 
 

@@ -31,9 +31,9 @@ from benchmarks.load_clients import Client, Tally, annotate, curate
 from benchmarks.served import served_app, start_worker, stop
 from benchmarks.workspace import ingested_workspace
 from dataset.db import scratch_database, transaction
-from dataset.models import Frame, FrameState, Job
 from dataset.services import users as user_service
 from dataset.synthetic import write_synthetic_dataset
+from dataset.tables import Frame, FrameState, Job
 from webapp.runtime import Runtime
 
 BENCH_DATABASE = "bench_load"

@@ -17,7 +17,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from benchmarks.load_clients import Save, Tally
-from dataset.models import Annotation, AuditEntry, Frame, Review
+from dataset.tables import Annotation, AuditEntry, Frame, Review
 
 
 def lost_writes(session: Session, tallies: Sequence[Tally]) -> dict[str, int]:

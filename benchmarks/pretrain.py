@@ -21,8 +21,8 @@ from typing import Any
 
 from benchmarks import fusion, provenance
 from benchmarks.trunk import STEREO_ONLY_TRUNK_FILE, TRUNK_FILE, save_trunk
-from dataset.models import TrainingRun
 from dataset.synthetic.io import FORMAT as SYNTHETIC_FORMAT
+from dataset.tables import TrainingRun
 from dataset.version import code_version
 
 PRETRAIN_FIRST_SEED = 10_000

@@ -29,11 +29,11 @@ from sqlalchemy import Connection, text
 
 from benchmarks.served import served_app
 from dataset.db import alembic_config, make_engine, make_session_factory, scratch_database, transaction
-from dataset.models import User
 from dataset.services import jobs as job_service
 from dataset.services import users as user_service
 from dataset.services.prefilter import launch_prefilter
 from dataset.settings import write_settings_file
+from dataset.tables import User
 
 FRAMES_PER_VIDEO = 1000
 CHUNK_VIDEOS = 20  # videos generated and inserted per round trip

@@ -10,7 +10,6 @@ from typing import Any
 from sqlalchemy import select, update
 
 from dataset.db import migrate, transaction
-from dataset.models import Frame, FrameState, Sample, User
 from dataset.readers.version import pin_dataset_version
 from dataset.services import jobs as job_service
 from dataset.services import pipeline
@@ -20,6 +19,7 @@ from dataset.services.ingest import ingest_params
 from dataset.services.sample_review import review_sample
 from dataset.settings import load_settings, write_settings_file
 from dataset.synthetic import write_synthetic_dataset
+from dataset.tables import Frame, FrameState, Sample, User
 from model.presets import Config
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime

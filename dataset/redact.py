@@ -120,7 +120,7 @@ def stop_using(token: Token[Redactor | None]) -> None:
     _CURRENT.reset(token)
 
 
-def shown(value: T) -> T:
+def redacted(value: T) -> T:
     """``value`` (text or JSON-like data from a source that may carry server paths) as the answer
     being built may show it: rewritten by the current request's redactor; as it is outside a request."""
     redactor = _CURRENT.get()

@@ -1,7 +1,7 @@
 """The states and kinds the database stores, as plain string enums.
 
 Pure (no SQLAlchemy): readers of dataset folders and the trainer check values against them without
-loading the database layer; ``dataset.models`` maps them to columns and is where the rest of the
+loading the database layer; ``dataset.tables`` maps them to columns and is where the rest of the
 code imports them from.
 """
 

@@ -16,9 +16,9 @@ import pytest
 from werkzeug import security
 
 from dataset.db import make_engine, make_session_factory, migrate, scratch_database, transaction
-from dataset.models import Role
 from dataset.services import users as user_service
 from dataset.settings import Settings, load_settings
+from dataset.tables import Role
 from webapp.runtime import Runtime
 
 # Fixtures shared between test modules live in plugin modules, never imported by the tests:

@@ -12,10 +12,10 @@ import numpy as np
 from core.atomic import atomic_write_bytes
 from core.formats import write_pfm
 from dataset.db import transaction
-from dataset.models import Sample, TrainingRun
 from dataset.readers.version import pin_dataset_version
 from dataset.services import jobs as job_service
 from dataset.services import training
+from dataset.tables import Sample, TrainingRun
 from model.runs.evaluation import EvalShellOptions, evaluation_params
 from model.runs.schema import EvaluationLaunch, validate
 from tests.runs_data import DISPARITY, H, W, add_accepted_samples

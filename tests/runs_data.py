@@ -7,8 +7,8 @@ import numpy as np
 from sqlalchemy.orm import Session
 
 from dataset.media import MediaStore
-from dataset.models import Frame, FrameState, Sample, SampleState, SourceKind, Video
 from dataset.samples import store_outputs
+from dataset.tables import Frame, FrameState, Sample, SampleState, SourceKind, Video
 
 H, W, DISPARITY = 64, 96, 4.0
 

@@ -11,9 +11,9 @@ from click.testing import CliRunner
 from sqlalchemy import select
 
 from dataset.db import transaction
-from dataset.models import ApiToken
 from dataset.services import users as user_service
 from dataset.services.errors import Conflict
+from dataset.tables import ApiToken
 from tests.conftest import PASSWORD, csrf_from, login
 from webapp.cli import main as cli
 

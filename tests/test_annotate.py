@@ -14,8 +14,8 @@ from sqlalchemy import select, update
 
 from core.formats import mask_to_rle
 from dataset.db import transaction
-from dataset.models import Annotation, AuditEntry, Frame, FrameState, Job
 from dataset.services import jobs as job_service
+from dataset.tables import Annotation, AuditEntry, Frame, FrameState, Job
 from tests.conftest import PASSWORD
 from tests.fixtures.annotate import H, W
 from webapp.jobs.handlers import HANDLERS

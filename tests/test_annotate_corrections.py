@@ -13,11 +13,11 @@ from sqlalchemy import update
 
 from core.formats import mask_to_rle, rle_to_mask
 from dataset.db import migrate, transaction
-from dataset.models import Frame, FrameState
 from dataset.services import jobs as job_service
 from dataset.services.ingest import ingest_params
 from dataset.settings import Settings
 from dataset.synthetic import write_synthetic_dataset
+from dataset.tables import Frame, FrameState
 from tests.conftest import make_settings
 from tests.test_annotate import auth, interior_point, truth
 from webapp.jobs.handlers import HANDLERS

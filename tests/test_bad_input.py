@@ -9,8 +9,8 @@ from typing import Any
 import pytest
 
 from dataset.db import migrate, transaction
-from dataset.models import Frame, FrameState, SourceKind, Video
 from dataset.services import users as user_service
+from dataset.tables import Frame, FrameState, SourceKind, Video
 from tests.conftest import PASSWORD, make_settings
 from webapp.runtime import Runtime
 

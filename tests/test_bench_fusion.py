@@ -297,7 +297,7 @@ def test_a_trained_network_is_reused_only_when_everything_that_makes_it_is_equal
     """The workspace's ledger: the same config (however its overrides are spelled), seed, trunk and model
     code find the run once it succeeded with its best checkpoint; any of them changed trains anew."""
     from dataset.db import transaction
-    from dataset.models import RunState, TrainingRun
+    from dataset.tables import RunState, TrainingRun
     from webapp.cli.workspace import init_workspace
     from webapp.runtime import Runtime
 
@@ -348,8 +348,8 @@ def test_a_trained_network_is_reused_only_when_everything_that_makes_it_is_equal
 def test_a_benchmark_runs_only_the_jobs_of_the_runs_it_launched(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Two benchmarks on one work dir share its queue: each drains only its own runs' jobs."""
     from dataset.db import transaction
-    from dataset.models import Job, JobState, RunState, TrainingRun
     from dataset.services import jobs as job_service
+    from dataset.tables import Job, JobState, RunState, TrainingRun
     from webapp.cli.workspace import init_workspace
     from webapp.runtime import Runtime
 

@@ -12,7 +12,7 @@ from click.testing import CliRunner
 from benchmarks.load_check import lost_writes
 from benchmarks.load_clients import Decision, Save, Tally
 from dataset.db import transaction
-from dataset.models import Annotation, Frame, FrameState, Region, RegionKind, SourceKind, Video
+from dataset.tables import Annotation, Frame, FrameState, Region, RegionKind, SourceKind, Video
 from tests.conftest import TEST_DATABASE_URL, TEST_REDIS_URL
 from webapp.cli import main
 

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from dataset.db import migrate, transaction
-from dataset.models import Role
 from dataset.services import users as user_service
+from dataset.tables import Role
 from tests.browser import login, serving
 from tests.conftest import PASSWORD, make_settings
 from tests.evaluations_data import evaluated_database

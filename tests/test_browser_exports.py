@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 
 from dataset.db import migrate, transaction
-from dataset.models import Role
 from dataset.services import users as user_service
+from dataset.tables import Role
 from tests.browser import ROOT, login, page_with_errors, serving, stop
 from tests.conftest import PASSWORD, make_settings
 from tests.runs_data import add_accepted_samples

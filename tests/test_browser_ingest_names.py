@@ -10,10 +10,10 @@ from pathlib import Path
 import pytest
 
 from dataset.db import migrate, transaction
-from dataset.models import Role
 from dataset.services import jobs as job_service
 from dataset.services import users as user_service
 from dataset.synthetic import write_synthetic_dataset
+from dataset.tables import Role
 from tests.browser import collect_errors, login, serving
 from tests.conftest import PASSWORD, make_settings
 from webapp.jobs.handlers import HANDLERS

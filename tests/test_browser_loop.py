@@ -16,12 +16,12 @@ import pytest
 from sqlalchemy import select, update
 
 from dataset.db import migrate, transaction
-from dataset.models import Frame, FrameState, PrefilterResult, Role, User
 from dataset.services import jobs as job_service
 from dataset.services import users as user_service
 from dataset.services.ingest import ingest_params
 from dataset.services.sample_review import review_sample
 from dataset.synthetic import write_synthetic_dataset
+from dataset.tables import Frame, FrameState, PrefilterResult, Role, User
 from tests.browser import collect_errors, login, serving
 from tests.conftest import PASSWORD, make_settings
 from tests.test_browser_annotate import click_image, interior, shown_frame

@@ -13,9 +13,9 @@ from pathlib import Path
 import pytest
 
 from dataset.db import migrate, transaction
-from dataset.models import Role, RunState, TrainingRun, utcnow
 from dataset.services import training
 from dataset.services import users as user_service
+from dataset.tables import Role, RunState, TrainingRun, utcnow
 from model.presets import load_preset
 from tests.browser import login, page_with_errors, serving
 from tests.conftest import PASSWORD, make_settings

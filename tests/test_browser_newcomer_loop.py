@@ -19,7 +19,11 @@ from sqlalchemy import select
 
 from core.formats import mask_to_rle
 from dataset.db import migrate, transaction
-from dataset.models import (
+from dataset.services import users as user_service
+from dataset.services.annotate import frame_detail, save_annotation, take_lease
+from dataset.services.frames import update_frame
+from dataset.services.sample_review import review_sample
+from dataset.tables import (
     Annotation,
     Frame,
     FrameState,
@@ -35,10 +39,6 @@ from dataset.models import (
     TrainingRun,
     utcnow,
 )
-from dataset.services import users as user_service
-from dataset.services.annotate import frame_detail, save_annotation, take_lease
-from dataset.services.frames import update_frame
-from dataset.services.sample_review import review_sample
 from tests.browser import login, page_with_errors, serving
 from tests.conftest import PASSWORD, make_settings
 from tests.test_generate import prepare

@@ -8,8 +8,8 @@ from collections.abc import Iterator
 import pytest
 
 from dataset.db import migrate, transaction
-from dataset.models import Role
 from dataset.services import users as user_service
+from dataset.tables import Role
 from model.checkpoint import save_checkpoint
 from model.network import FusionNetwork
 from model.presets import load_preset

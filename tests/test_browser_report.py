@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 
 from dataset.db import migrate, transaction
-from dataset.models import Frame, FrameState, Role, Sample, SampleState
 from dataset.services import users as user_service
+from dataset.tables import Frame, FrameState, Role, Sample, SampleState
 from tests.browser import login, page_with_errors, serving
 from tests.conftest import PASSWORD, make_settings
 from tests.evaluations_data import evaluated_database

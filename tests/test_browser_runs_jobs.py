@@ -12,9 +12,9 @@ from pathlib import Path
 import pytest
 
 from dataset.db import migrate, transaction
-from dataset.models import Job, JobState, Role, RunState, TrainingRun, utcnow
 from dataset.services import training
 from dataset.services import users as user_service
+from dataset.tables import Job, JobState, Role, RunState, TrainingRun, utcnow
 from tests.browser import login, page_with_errors, serving
 from tests.conftest import PASSWORD, make_settings
 from tests.test_run_logs import write_launch

@@ -12,9 +12,9 @@ import pytest
 from sqlalchemy import update
 
 from dataset.db import migrate, transaction
-from dataset.models import Frame, FrameState, JobState, Role
 from dataset.services import jobs as job_service
 from dataset.services import users as user_service
+from dataset.tables import Frame, FrameState, JobState, Role
 from tests.browser import collect_errors, login, serving
 from tests.conftest import PASSWORD, make_settings
 from tests.test_ingest import run_ingest, write_avi

@@ -33,11 +33,11 @@ from dataset.capture import (
 )
 from dataset.capture import capture_import as capture_module
 from dataset.db import transaction
-from dataset.models import Frame, Job, JobState, Sample, Video
 from dataset.samples import load_output, load_outputs
 from dataset.services import jobs as job_service
 from dataset.services.errors import NotFound
 from dataset.synthetic import SyntheticVideo, render_video, write_synthetic_dataset
+from dataset.tables import Frame, Job, JobState, Sample, Video
 from tests.test_ingest import run_ingest
 from webapp.cli.capture import import_capture, import_reconstruction
 from webapp.cli.state import CliState

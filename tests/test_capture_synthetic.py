@@ -7,11 +7,11 @@ from sqlalchemy import func, select
 
 from dataset.capture.synthetic import import_rendered_video
 from dataset.db import transaction
-from dataset.models import Sample, SourceKind, Video
 from dataset.readers.version import VersionReader, pin_dataset_version
 from dataset.services import users as user_service
 from dataset.services.sample_review import review_sample
 from dataset.synthetic import render_video
+from dataset.tables import Sample, SourceKind, Video
 from webapp.runtime import Runtime
 
 

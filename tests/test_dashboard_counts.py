@@ -4,8 +4,8 @@ them out; frames a curator rejected after the prefilter passed them stay counted
 from __future__ import annotations
 
 from dataset.db import transaction
-from dataset.models import FrameState, PrefilterResult
 from dataset.services.frames import funnel_counts
+from dataset.tables import FrameState, PrefilterResult
 from tests.test_data_layer import _frame, _video
 
 

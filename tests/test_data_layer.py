@@ -10,11 +10,11 @@ from sqlalchemy import func, select, text
 from sqlalchemy.exc import IntegrityError
 
 from dataset.db import alembic_config, make_engine, migrate, schema_is_current, transaction
-from dataset.models import AuditEntry, Base, Frame, FrameState, PrefilterResult, Role, SourceKind, User, Video
 from dataset.services import audit
 from dataset.services import users as user_service
 from dataset.services.errors import Conflict, InvalidInput
 from dataset.services.frames import funnel_counts, list_frames
+from dataset.tables import AuditEntry, Base, Frame, FrameState, PrefilterResult, Role, SourceKind, User, Video
 
 
 def _video(s, name: str = "v") -> Video:  # type: ignore[no-untyped-def]

@@ -12,7 +12,6 @@ from sqlalchemy import select
 
 from dataset.db import transaction
 from dataset.media import MediaStore
-from dataset.models import Annotation, Frame, FrameState, IllusionType, Sample, SampleState, SourceKind, Video
 from dataset.readers.version import (
     VersionReader,
     pin_dataset_version,
@@ -22,6 +21,7 @@ from dataset.readers.version import (
 )
 from dataset.samples import load_outputs, store_outputs
 from dataset.services.errors import InvalidInput
+from dataset.tables import Annotation, Frame, FrameState, IllusionType, Sample, SampleState, SourceKind, Video
 from webapp.runtime import Runtime
 
 

@@ -86,7 +86,7 @@ def _answers(url: str) -> bool:
 @pytest.mark.timeout(1200)  # a 40-step run and an evaluation, on a loaded 2-core machine
 def test_the_demo_serves_first_then_makes_its_run_current_and_evaluates_it(tmp_path: Path) -> None:
     pytest.importorskip("torch")
-    from dataset.models import Evaluation, JobState, RunState, TrainingRun
+    from dataset.tables import Evaluation, JobState, RunState, TrainingRun
     from webapp.runtime import Runtime
 
     home, port, log = tmp_path / "demo", free_port(), tmp_path / "demo.log"

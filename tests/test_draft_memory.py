@@ -19,8 +19,8 @@ from pycocotools import mask as coco_mask
 from core.formats import FormatError, rle_to_mask
 from core.formats.rle import MAX_PIXELS, compact_list_counts
 from dataset.db import transaction
-from dataset.models import Frame, FrameState, SourceKind, Video
 from dataset.services.annotate import DRAFT_VALUES, MAX_REGIONS
+from dataset.tables import Frame, FrameState, SourceKind, Video
 from webapp.api.blueprint import too_many_values
 from webapp.bodies import DRAFT_BODY_BYTES
 from webapp.runtime import Runtime

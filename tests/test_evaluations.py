@@ -9,9 +9,9 @@ import pytest
 from sqlalchemy import select
 
 from dataset.db import transaction
-from dataset.models import Evaluation, EvaluationResult
 from dataset.services import evaluations
 from dataset.services.errors import NotFound
+from dataset.tables import Evaluation, EvaluationResult
 from tests.evaluations_data import STEP_PX, evaluated_database
 
 
@@ -99,7 +99,7 @@ def test_samples_by_error_and_one_evaluated_sample(client, tokens, evaluated) ->
 
 
 def test_a_running_evaluation_says_how_far_it_is(client, runtime, tokens, evaluated) -> None:  # type: ignore[no-untyped-def]
-    from dataset.models import Job, JobState
+    from dataset.tables import Job, JobState
 
     curator = _auth(tokens, "curator")
     launched = client.post("/api/v1/evaluations", json={"methods": ["sgbm"], "run": 1}, headers=curator)
@@ -114,7 +114,7 @@ def test_a_running_evaluation_says_how_far_it_is(client, runtime, tokens, evalua
 
 
 def test_a_samples_provenance_reads_as_text(client, runtime, tokens, evaluated) -> None:  # type: ignore[no-untyped-def]
-    from dataset.models import Sample
+    from dataset.tables import Sample
 
     sample_id = evaluated[1][0]
     with transaction(runtime.sessions) as s:

@@ -15,8 +15,8 @@ from sqlalchemy import select
 
 from core.formats import read_pfm, write_pfm
 from dataset.export import HANDLERS as EXPORT_HANDLERS
-from dataset.models import Annotation, Frame, JobState, Sample, SourceKind, Video
 from dataset.samples import load_outputs
+from dataset.tables import Annotation, Frame, JobState, Sample, SourceKind, Video
 from tests.fixtures.workspaces import counts, export, import_, tree
 from webapp.cli import main
 from webapp.jobs.handlers import HANDLERS

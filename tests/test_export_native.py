@@ -19,7 +19,7 @@ from sqlalchemy import select
 
 from core.formats import read_mask
 from dataset.export import LayoutError, export_params, parse_split_spec, split_of
-from dataset.models import Job, JobState
+from dataset.tables import Job, JobState
 from tests.fixtures.workspaces import SEED, SPLIT, counts, export, import_, run_job, tree
 from webapp.cli import main
 from webapp.runtime import Runtime
@@ -88,7 +88,7 @@ def test_import_twice_adds_nothing(source: Runtime, fresh: Runtime, tmp_path: Pa
 
 def test_an_interrupted_import_resumes(source: Runtime, fresh: Runtime, tmp_path: Path,
                                       monkeypatch: pytest.MonkeyPatch) -> None:
-    import dataset.export.jobs as export_jobs
+    import dataset.export.handlers as export_jobs
 
     export(source, tmp_path / "ds")
     calls = []

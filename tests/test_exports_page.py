@@ -17,8 +17,8 @@ from click.testing import CliRunner
 from sqlalchemy import func, select
 
 from dataset.db import transaction
-from dataset.models import Export, Job, JobState, utcnow
 from dataset.services import jobs as job_service
+from dataset.tables import Export, Job, JobState, utcnow
 from tests.conftest import csrf_from, login
 from tests.runs_data import add_accepted_samples
 from webapp.cli import main

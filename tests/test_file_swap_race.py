@@ -26,10 +26,10 @@ import httpx
 import pytest
 
 from dataset.db import migrate, transaction
-from dataset.models import Evaluation, JobState, Role
 from dataset.services import evaluations, training
 from dataset.services import jobs as job_service
 from dataset.services import users as user_service
+from dataset.tables import Evaluation, JobState, Role
 from tests.conftest import make_settings
 from tests.runs_data import add_accepted_samples
 from tests.test_runs import _queued_run

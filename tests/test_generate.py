@@ -10,12 +10,12 @@ import pytest
 from sqlalchemy import func, select, update
 
 from dataset.db import transaction
-from dataset.models import Annotation, Frame, FrameState, Job, Sample, User
 from dataset.samples import load_outputs
 from dataset.services import jobs as job_service
 from dataset.services.demo import true_regions
 from dataset.services.ingest import ingest_params
 from dataset.synthetic import read_video, write_synthetic_dataset
+from dataset.tables import Annotation, Frame, FrameState, Job, Sample, User
 from tests.workers import wait_for
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime

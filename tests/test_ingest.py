@@ -14,10 +14,10 @@ from sqlalchemy import func, select
 from dataset.db import transaction
 from dataset.ingest import IngestError, dhash, find_sources, hamming, open_source
 from dataset.ingest.sources import sampled
-from dataset.models import Frame, Job, JobState, Video
 from dataset.services import jobs as job_service
 from dataset.services.ingest import ingest_params
 from dataset.synthetic import write_synthetic_dataset
+from dataset.tables import Frame, Job, JobState, Video
 from tests.test_cli import cli
 from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime

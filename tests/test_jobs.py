@@ -12,12 +12,12 @@ from click.testing import CliRunner
 from sqlalchemy import func, select
 
 from dataset.db import transaction
-from dataset.models import Frame, Job, JobState
 from dataset.redact import redactor_for
 from dataset.services import jobs as job_service
 from dataset.services.ingest import ingest_params
 from dataset.settings import Settings
 from dataset.synthetic import write_synthetic_dataset
+from dataset.tables import Frame, Job, JobState
 from tests.workers import wait_for
 from webapp.cli import main
 from webapp.jobs.handlers import HANDLERS

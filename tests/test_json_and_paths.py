@@ -17,9 +17,9 @@ import pytest
 from flask import Flask
 
 from dataset.db import migrate, transaction
-from dataset.models import Evaluation, TrainingRun
 from dataset.services import training
 from dataset.services import users as user_service
+from dataset.tables import Evaluation, TrainingRun
 from tests.conftest import make_settings
 from webapp.app import create_app
 from webapp.runtime import Runtime
@@ -33,7 +33,7 @@ def _strict(text: str) -> Any:
 
 
 def test_a_route_returning_nan_answers_null(app: Flask, tokens: dict[str, str]) -> None:
-    from dataset.models import Role
+    from dataset.tables import Role
     from webapp.auth import requires
 
     @requires(Role.annotator)

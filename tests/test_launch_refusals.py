@@ -15,11 +15,11 @@ from click.testing import CliRunner
 from sqlalchemy import select
 
 from dataset.db import transaction
-from dataset.models import TrainingRun
 from dataset.services import jobs as job_service
 from dataset.services import training
 from dataset.services.errors import FieldError
 from dataset.settings import Settings
+from dataset.tables import TrainingRun
 from model.checkpoint import save_checkpoint
 from model.network import FusionNetwork
 from model.presets import load_preset

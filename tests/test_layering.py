@@ -106,7 +106,7 @@ def test_the_job_table_and_the_cli_load_without_torch() -> None:
 
 # What a trainer process never needs: the database layer and the COCO mask codec. Every rank imports
 # the engine, so each of these would cost start-up time on every rank, for nothing.
-TRAINER_MUST_NOT_LOAD = ("sqlalchemy", "alembic", "pycocotools", "dataset.db", "dataset.models", "dataset.services")
+TRAINER_MUST_NOT_LOAD = ("sqlalchemy", "alembic", "pycocotools", "dataset.db", "dataset.tables", "dataset.services")
 # ...but the exceptions every layer raises are pure and may load.
 TRAINER_MAY_LOAD = ("dataset.services", "dataset.services.errors")
 # The engine: the trainer's entry module and what its main() imports, and the network, losses, metrics,

@@ -6,8 +6,8 @@ from __future__ import annotations
 from sqlalchemy import select, update
 
 from dataset.db import transaction
-from dataset.models import Annotation, Frame, FrameState, Job, JobState
 from dataset.services import users as user_service
+from dataset.tables import Annotation, Frame, FrameState, Job, JobState
 from tests.conftest import PASSWORD
 from tests.test_annotate import auth
 

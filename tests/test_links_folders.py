@@ -15,10 +15,10 @@ import pytest
 from core.formats import write_pfm
 from dataset.contained import contained_file, open_contained, storage_root
 from dataset.db import transaction
-from dataset.models import Evaluation, EvaluationResult, Job, JobState, TrainingRun
 from dataset.services import evaluations, run_logs, training
 from dataset.services import jobs as job_service
 from dataset.settings import Settings
+from dataset.tables import Evaluation, EvaluationResult, Job, JobState, TrainingRun
 from tests.conftest import make_settings, migrate
 from tests.evaluations_data import evaluated_database
 from tests.runs_data import H, W, add_accepted_samples
@@ -454,8 +454,8 @@ def test_a_run_refuses_its_folder_planted_as_a_link(client, tokens, runtime, sam
 
 def test_runs_and_evaluations_may_be_links_resolved_once(tmp_path: Path) -> None:
     shared = tmp_path / "shared"
-    from dataset.models import Role
     from dataset.services import users as user_service
+    from dataset.tables import Role
     from webapp.app import create_app
     from webapp.runtime import Runtime
 

@@ -13,9 +13,9 @@ from sqlalchemy import select
 
 from core.formats import FormatError, mask_to_rle, rle_to_mask
 from dataset.db import transaction
-from dataset.models import Annotation, Frame, FrameState, Sample, SampleState
 from dataset.services import users as user_service
 from dataset.services.validate import REASON_CHARS
+from dataset.tables import Annotation, Frame, FrameState, Sample, SampleState
 from tests.fixtures.annotate import H, W
 from tests.test_annotate import auth
 

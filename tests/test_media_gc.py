@@ -12,11 +12,11 @@ from click.testing import CliRunner
 from sqlalchemy import select
 
 from dataset.db import transaction
-from dataset.models import Frame, Job, JobState, Sample
 from dataset.services import jobs as job_service
 from dataset.services.ingest import ingest_params
 from dataset.services.media_gc import clean_incoming
 from dataset.synthetic import write_synthetic_dataset
+from dataset.tables import Frame, Job, JobState, Sample
 from webapp.cli import main as cli
 from webapp.jobs.handlers import HANDLERS
 

@@ -16,12 +16,12 @@ import pytest
 from sqlalchemy import select
 
 from dataset.db import transaction
-from dataset.models import Annotation, Frame, Job, JobState, Role, RunState, Sample, SampleState, TrainingRun, User, utcnow
 from dataset.services import users as user_service
 from dataset.services.annotate import frame_detail, save_annotation, take_lease
 from dataset.services.errors import InvalidInput
 from dataset.services.jobs import job_json, mark_for_retry
 from dataset.services.sample_review import review_sample, sample_detail
+from dataset.tables import Annotation, Frame, Job, JobState, Role, RunState, Sample, SampleState, TrainingRun, User, utcnow
 from model.runs.report import ranked_samples
 from tests.conftest import login
 from tests.test_annotate import auth

@@ -14,10 +14,10 @@ import pytest
 from werkzeug.test import TestResponse
 
 from dataset.db import transaction
-from dataset.models import Evaluation, Frame, FrameState, Job, JobState, SourceKind, Video
 from dataset.services import evaluations, training
 from dataset.services import jobs as job_service
 from dataset.services import users as user_service
+from dataset.tables import Evaluation, Frame, FrameState, Job, JobState, SourceKind, Video
 from tests.conftest import PASSWORD
 from tests.test_bad_input import documented_answer_checks
 from tests.test_queue_outage import outage_app

@@ -14,13 +14,13 @@ from dataset.db import alembic_config, make_engine, transaction
 from dataset.export.coco import coco_document
 from dataset.export.native import export_native
 from dataset.export.selection import select_samples
-from dataset.models import Frame, Region, Sample, SampleState, User
 from dataset.readers import open_reader
 from dataset.readers.version import VersionReader, pin_dataset_version
 from dataset.samples import load_output
 from dataset.services.annotate import save_annotation
 from dataset.services.demo import true_regions
 from dataset.services.errors import InvalidInput
+from dataset.tables import Frame, Region, Sample, SampleState, User
 from tests.test_generate import _user, generate_all, prepare
 from webapp.runtime import Runtime
 

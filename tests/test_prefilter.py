@@ -13,12 +13,12 @@ from sqlalchemy import func, select
 
 from benchmarks.vlm_server import ChatRequest, LocalVLMServer, Reply
 from dataset.db import transaction
-from dataset.models import Frame, Job, PrefilterResult
 from dataset.services import jobs as job_service
 from dataset.services.frames import funnel_counts
 from dataset.services.ingest import ingest_params
 from dataset.services.prefilter import launch_prefilter
 from dataset.synthetic import write_synthetic_dataset
+from dataset.tables import Frame, Job, PrefilterResult
 from tests.conftest import make_settings
 from tests.workers import wait_for
 from webapp.jobs.handlers import HANDLERS

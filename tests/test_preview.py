@@ -9,11 +9,11 @@ import pytest
 import zstandard
 
 from dataset.db import transaction
-from dataset.models import Frame, FrameState, Sample, SourceKind, Video
 from dataset.preview import images, qa
 from dataset.preview.cloud import HIGHLIGHT_RGB, VirtualCamera, disparity_cloud, grid_stride
 from dataset.preview.scene import export_scene
 from dataset.samples import store_outputs
+from dataset.tables import Frame, FrameState, Sample, SourceKind, Video
 
 H, W = 48, 64
 

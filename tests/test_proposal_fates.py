@@ -12,8 +12,8 @@ from sqlalchemy import select
 
 from core.formats import mask_to_rle, rle_to_mask
 from dataset.db import transaction
-from dataset.models import Frame, FrameState, Job, Proposal, ProposalScan
 from dataset.services import jobs as job_service
+from dataset.tables import Frame, FrameState, Job, Proposal, ProposalScan
 from tests.fixtures.annotate import H, W
 from tests.test_annotate import auth, truth
 from webapp.jobs.handlers import HANDLERS

@@ -15,10 +15,10 @@ from sqlalchemy import select, update
 from annotation.proposals.plane_break import DEFAULT_THRESHOLD, SCORE_FLOOR
 from core.formats import rle_to_mask
 from dataset.db import migrate, transaction
-from dataset.models import Proposal, ProposalScan
 from dataset.services import jobs as job_service
 from dataset.services.proposals import configured_proposers
 from dataset.settings import Settings, SettingsError, load_settings
+from dataset.tables import Proposal, ProposalScan
 from tests.conftest import make_settings
 from tests.fixtures.annotate import H, W
 from tests.test_annotate import auth, truth

@@ -9,11 +9,11 @@ import pytest
 from sqlalchemy import func, select
 
 from dataset.db import migrate, transaction
-from dataset.models import Job, JobState
 from dataset.services import jobs as job_service
 from dataset.services import users as user_service
 from dataset.services.ingest import ingest_params
 from dataset.synthetic import write_synthetic_dataset
+from dataset.tables import Job, JobState
 from tests.conftest import PASSWORD, csrf_from, login, make_settings
 from tests.workers import wait_for
 from webapp.jobs.handlers import HANDLERS

@@ -14,9 +14,9 @@ torch = pytest.importorskip("torch")
 
 from core.formats import write_rgb  # noqa: E402
 from dataset.db import transaction  # noqa: E402
-from dataset.models import TrainingRun  # noqa: E402
 from dataset.services import training  # noqa: E402
 from dataset.services.errors import InvalidInput, NotFound  # noqa: E402
+from dataset.tables import TrainingRun  # noqa: E402
 from model.checkpoint import save_checkpoint  # noqa: E402
 from model.network import FusionNetwork  # noqa: E402
 from model.presets import load_preset  # noqa: E402

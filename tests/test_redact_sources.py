@@ -12,12 +12,12 @@ import pytest
 from sqlalchemy import select
 
 from dataset.db import transaction
-from dataset.models import Frame, Role, TrainingRun
-from dataset.redact import redactor_for, shown, stop_using, use_redactor
+from dataset.redact import redacted, redactor_for, stop_using, use_redactor
 from dataset.services import jobs as job_service
 from dataset.services import users as user_service
 from dataset.services.jobs import JobContext
 from dataset.settings import Settings
+from dataset.tables import Frame, Role, TrainingRun
 from tests.test_links_folders import bearer, evaluated
 from tests.test_returned_frames import submitted_and_generated
 from tests.test_runs import SHORT, _queued_run
@@ -104,18 +104,18 @@ def test_a_reports_failures_show_no_server_path(client, tokens, runtime: Runtime
 
 def test_shown_rewrites_only_inside_a_request_that_set_a_redactor(settings) -> None:  # type: ignore[no-untyped-def]
     text = f"{settings.home}/runs/1 and /usr/share/doc"
-    assert shown(text) == text  # the command line's user has a shell
+    assert redacted(text) == text  # the command line's user has a shell
     token = use_redactor(redactor_for(settings))
     try:
-        assert shown({"a": [text], "n": 1}) == {"a": ["runs/1 and …/doc"], "n": 1}
+        assert redacted({"a": [text], "n": 1}) == {"a": ["runs/1 and …/doc"], "n": 1}
     finally:
         stop_using(token)
-    assert shown(text) == text
+    assert redacted(text) == text
 
 
 def test_a_samples_provenance_shows_no_server_path(client, runtime: Runtime, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     """A command-line capture import records the folder it read; the sample's answer names it without the path."""
-    from dataset.models import Sample
+    from dataset.tables import Sample
     from tests.test_generate import prepare
 
     prepare(runtime, tmp_path, n_frames=2, annotate=False)

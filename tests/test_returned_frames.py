@@ -11,13 +11,13 @@ import pytest
 from sqlalchemy import select, update
 
 from dataset.db import transaction
-from dataset.models import Annotation, Frame, FrameState, Role, Sample, SampleState
 from dataset.services import users as user_service
 from dataset.services.annotate import frame_detail, save_annotation
 from dataset.services.demo import true_regions
 from dataset.services.frames import update_frame
 from dataset.services.leases import next_frame
 from dataset.services.sample_review import review_sample
+from dataset.tables import Annotation, Frame, FrameState, Role, Sample, SampleState
 from tests.test_generate import prepare
 from webapp.runtime import Runtime
 

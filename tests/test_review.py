@@ -6,11 +6,11 @@ import pytest
 from sqlalchemy import select
 
 from dataset.db import transaction
-from dataset.models import AuditEntry, Frame, FrameState, PrefilterResult, Review, SourceKind, Video
 from dataset.services import review as review_service
 from dataset.services import users as user_service
 from dataset.services.errors import Conflict, InvalidInput
 from dataset.services.frames import funnel_counts
+from dataset.tables import AuditEntry, Frame, FrameState, PrefilterResult, Review, SourceKind, Video
 
 
 def seed_frames(s, n: int = 4) -> list[int]:  # type: ignore[no-untyped-def]

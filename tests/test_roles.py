@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pytest
 
-from dataset.models import Role
+from dataset.tables import Role
 from tests.conftest import login
 
 PUBLIC = None

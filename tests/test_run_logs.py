@@ -8,9 +8,9 @@ import re
 from pathlib import Path
 
 from dataset.db import transaction
-from dataset.models import TrainingRun
 from dataset.services import jobs as job_service
 from dataset.services import run_logs, training
+from dataset.tables import TrainingRun
 from model.runs.report import picture_caption, report_html, sample_label
 from tests.test_runs import bearer
 

@@ -10,9 +10,9 @@ import pytest
 from click.testing import CliRunner
 
 from dataset.db import transaction
-from dataset.models import Job, JobState, RunState, TrainingRun
 from dataset.services import training
 from dataset.services.errors import Conflict, InvalidInput
+from dataset.tables import Job, JobState, RunState, TrainingRun
 from model.runs import registry
 from tests.runs_data import add_accepted_samples
 from webapp.cli import main

@@ -7,8 +7,8 @@ from __future__ import annotations
 import pytest
 
 from dataset.db import transaction
-from dataset.models import TrainingMetric, TrainingRun
 from dataset.states import RunState
+from dataset.tables import TrainingMetric, TrainingRun
 from model.presets import load_preset
 from model.runs.run_length import Measured, Size, estimate
 from model.runs.schema import MAX_STEPS

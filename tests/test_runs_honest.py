@@ -16,8 +16,8 @@ import pytest
 import torch
 
 from dataset.db import transaction
-from dataset.models import JobState, RunState, TrainingRun
 from dataset.services import training
+from dataset.tables import JobState, RunState, TrainingRun
 from model.losses import fusion_loss
 from model.network import FusionNetwork
 from model.presets import load_preset

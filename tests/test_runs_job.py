@@ -12,9 +12,9 @@ import pytest
 from click.testing import CliRunner
 
 from dataset.db import transaction
-from dataset.models import Job, JobState, TrainingRun
 from dataset.services import jobs as job_service
 from dataset.services import training
+from dataset.tables import Job, JobState, TrainingRun
 from model.runs import registry
 from model.runs.launcher import group_members
 from tests.runs_data import add_accepted_samples

@@ -17,10 +17,10 @@ import pytest
 from sqlalchemy.exc import OperationalError
 
 from dataset.db import transaction
-from dataset.models import Job, JobState, RunState, TrainingRun
 from dataset.services import jobs as job_service
 from dataset.services import training
 from dataset.services.errors import Conflict
+from dataset.tables import Job, JobState, RunState, TrainingRun
 from model.runs.launcher import (
     TRAINERS_FILE,
     ProcessGroup,

@@ -11,9 +11,9 @@ import pytest
 from sqlalchemy import select, update
 
 from dataset.db import transaction
-from dataset.models import Annotation, Frame, FrameState, Job, JobState, User, Video
 from dataset.services import jobs as job_service
 from dataset.services.sample_blockers import failed_generate, failed_generate_count, sample_blocker
+from dataset.tables import Annotation, Frame, FrameState, Job, JobState, User, Video
 from tests.conftest import make_settings
 from tests.test_ingest import run_ingest, write_avi
 from webapp.runtime import Runtime

@@ -12,7 +12,12 @@ from sqlalchemy import func, select, text, update
 
 from benchmarks.scale import seed
 from dataset.db import alembic_config, make_engine, make_session_factory, transaction
-from dataset.models import (
+from dataset.services import review as review_service
+from dataset.services import sample_review
+from dataset.services import users as user_service
+from dataset.services.errors import InvalidInput
+from dataset.services.frames import frames_page, funnel_counts
+from dataset.tables import (
     Frame,
     FrameCount,
     FrameState,
@@ -24,11 +29,6 @@ from dataset.models import (
     SourceKind,
     Video,
 )
-from dataset.services import review as review_service
-from dataset.services import sample_review
-from dataset.services import users as user_service
-from dataset.services.errors import InvalidInput
-from dataset.services.frames import frames_page, funnel_counts
 
 _STATES = [FrameState.prefiltered, FrameState.approved, FrameState.rejected, FrameState.prefiltered,
            FrameState.ingested, FrameState.prefiltered, FrameState.deleted]

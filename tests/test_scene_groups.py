@@ -18,11 +18,11 @@ from benchmarks.scale import seed
 from dataset.db import alembic_config, make_engine, transaction
 from dataset.export import parse_split_spec, split_of
 from dataset.ingest.copies import find_copies
-from dataset.models import Frame, JobState, Video
 from dataset.readers.version import pin_dataset_version, split_by_video
 from dataset.services.errors import InvalidInput
 from dataset.services.scene_groups import join_scene_group
 from dataset.synthetic import write_synthetic_dataset
+from dataset.tables import Frame, JobState, Video
 from tests.fixtures.workspaces import export, open_runtime
 from tests.test_ingest import run_ingest, write_avi
 from webapp.runtime import Runtime

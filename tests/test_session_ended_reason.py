@@ -8,8 +8,8 @@ from datetime import timedelta
 from sqlalchemy import update
 
 from dataset.db import transaction
-from dataset.models import Role, UserSession, utcnow
 from dataset.services import users as user_service
+from dataset.tables import Role, UserSession, utcnow
 from tests.conftest import csrf_from, login
 
 

@@ -12,8 +12,8 @@ from click.testing import CliRunner
 from sqlalchemy import select, update
 
 from dataset.db import migrate, transaction
-from dataset.models import ApiToken, AuditEntry, Role, User, UserSession, utcnow
 from dataset.services import users as user_service
+from dataset.tables import ApiToken, AuditEntry, Role, User, UserSession, utcnow
 from tests.conftest import PASSWORD, csrf_from, login, make_settings
 from webapp.cli import main as cli
 from webapp.runtime import Runtime

@@ -11,8 +11,8 @@ from typing import Any
 import pytest
 
 from dataset.db import transaction
-from dataset.models import Job, JobState, TrainingRun
 from dataset.services import training
+from dataset.tables import Job, JobState, TrainingRun
 from model.runs.launcher import TRAINERS_FILE, group_members
 from model.train.checkpoints import step_checkpoints
 from tests.runs_data import add_accepted_samples

@@ -16,10 +16,10 @@ from click.testing import CliRunner
 
 from core.wording import quoted
 from dataset.db import transaction
-from dataset.models import Job, TrainingRun
 from dataset.services import jobs as job_service
 from dataset.services import training
 from dataset.settings import Settings
+from dataset.tables import Job, TrainingRun
 from model.checkpoint import FORMAT, UnsafeCheckpoint, load_checkpoint, upgrade_checkpoint
 from model.runs import registry
 from tests.conftest import make_settings

@@ -11,9 +11,9 @@ import time
 from click.testing import CliRunner
 
 from dataset.db import migrate, transaction
-from dataset.models import Job, JobState
 from dataset.services import jobs as job_service
 from dataset.services import users as user_service
+from dataset.tables import Job, JobState
 from tests.conftest import make_settings
 from webapp.app import create_app
 from webapp.cli import main as cli

@@ -16,8 +16,8 @@ from typing import Any
 import pytest
 
 from benchmarks import served
-from dataset.models import Job
 from dataset.settings import Settings, write_settings_file
+from dataset.tables import Job
 from tests.conftest import TEST_REDIS_URL, make_settings, migrate_copying
 from webapp.runtime import Runtime
 

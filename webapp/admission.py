@@ -28,10 +28,10 @@ from werkzeug.exceptions import HTTPException
 from werkzeug.http import parse_cookie
 from werkzeug.routing import RequestRedirect
 
-from dataset.models import Role
 from dataset.services import sessions as session_service
 from dataset.services import users as user_service
 from dataset.settings import Settings
+from dataset.tables import Role
 from webapp.auth import PUBLIC, ROLE_ATTR, SESSION_ID
 from webapp.bodies import body_limit
 from webapp.runtime import Runtime

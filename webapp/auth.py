@@ -17,9 +17,9 @@ from flask_wtf.csrf import CSRFProtect
 from werkzeug.datastructures import WWWAuthenticate
 from werkzeug.exceptions import HTTPException, TooManyRequests, Unauthorized
 
-from dataset.models import Role, User
 from dataset.services import sessions as session_service
 from dataset.services import users as user_service
+from dataset.tables import Role, User
 from webapp import throttle
 from webapp.runtime import runtime
 

@@ -6,8 +6,8 @@ from flask_wtf import FlaskForm
 from wtforms import PasswordField, SelectField, StringField
 from wtforms.validators import DataRequired, Length
 
-from dataset.models import Role
 from dataset.services.users import MAX_PASSWORD, MIN_PASSWORD
+from dataset.tables import Role
 
 
 class LoginForm(FlaskForm):

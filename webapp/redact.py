@@ -3,7 +3,7 @@ up as the app starts.
 
 Answers are not rewritten as a whole: what people type reaches others as they typed it, and a large
 answer (a SAM2 mask) costs nothing extra. The sources that bring server paths in are rewritten where
-they are shown (``dataset.redact``): services call :func:`dataset.redact.shown` (job logs, errors,
+they are shown (``dataset.redact``): services call :func:`dataset.redact.redacted` (job logs, errors,
 parameters and results, a run's end reason and parameters), for which this module makes the
 workspace's redactor the current one in every request; the views that serve a run's log or a
 report's text files apply :func:`app_redactor` themselves.

@@ -11,8 +11,8 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from dataset.db import make_engine, make_session_factory
 from dataset.media import MediaStore
-from dataset.models import Job, User
 from dataset.settings import Settings
+from dataset.tables import Job, User
 
 
 @dataclass

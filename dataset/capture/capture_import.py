@@ -29,9 +29,9 @@ from dataset.capture.truth import DEFAULT_DEPTH_RANGE_M, DEFAULT_EPSILON_M, capt
 from dataset.db import transaction
 from dataset.ingest import dhash
 from dataset.media import sha256_file
-from dataset.models import Frame, FrameState, Sample, SourceKind, Video, utcnow
 from dataset.samples import mask_name, store_outputs
 from dataset.services.jobs import JobContext
+from dataset.tables import Frame, FrameState, Sample, SourceKind, Video, utcnow
 from dataset.thumbnails import put_thumbnail
 from dataset.version import code_version
 

@@ -33,10 +33,10 @@ from dataset.capture.errors import CaptureError
 from dataset.capture.files import files_by_stem, matched_stems, names, trailing_number
 from dataset.capture.layout import IMAGE_SUFFIXES
 from dataset.db import transaction
-from dataset.models import Frame, Video
 from dataset.samples import store_outputs
 from dataset.services.errors import NotFound
 from dataset.services.jobs import JobContext
+from dataset.tables import Frame, Video
 
 RECONSTRUCTION_JOB = "import_reconstruction"
 MATCH_MODES = ("index", "order")

@@ -16,9 +16,9 @@ from sqlalchemy.orm import Session
 
 from dataset.ingest.phash import dhash
 from dataset.media import MediaStore
-from dataset.models import Frame, FrameState, Sample, SourceKind, Video
 from dataset.samples import mask_name, store_outputs
 from dataset.synthetic import SyntheticVideo
+from dataset.tables import Frame, FrameState, Sample, SourceKind, Video
 from dataset.thumbnails import put_thumbnail
 from dataset.version import code_version
 

@@ -3,7 +3,7 @@ layout, both ways, as jobs; and a torch ``Dataset`` over a native export (``torc
 on its own so that nothing else here needs torch).
 
 The names below load their submodule on first use: the trainer reads split specs through
-``dataset.export.splits``, and importing the jobs eagerly would load the database layer into it."""
+``dataset.export.splits``, and importing the job handlers eagerly would load the database layer into it."""
 
 from __future__ import annotations
 
@@ -12,17 +12,17 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from dataset.export.errors import LayoutError
-    from dataset.export.jobs import FORMATS, HANDLERS, export_job, export_params, import_job, import_params
+    from dataset.export.handlers import FORMATS, HANDLERS, export_job, export_params, import_job, import_params
     from dataset.export.splits import parse_split_spec, split_of
 
 _SUBMODULE = {
-    "FORMATS": "jobs",
-    "HANDLERS": "jobs",
+    "FORMATS": "handlers",
+    "HANDLERS": "handlers",
     "LayoutError": "errors",
-    "export_job": "jobs",
-    "export_params": "jobs",
-    "import_job": "jobs",
-    "import_params": "jobs",
+    "export_job": "handlers",
+    "export_params": "handlers",
+    "import_job": "handlers",
+    "import_params": "handlers",
     "parse_split_spec": "splits",
     "split_of": "splits",
 }

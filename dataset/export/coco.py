@@ -16,8 +16,8 @@ import numpy as np
 
 from core.formats import mask_to_rle
 from dataset.export.records import SampleRecord
-from dataset.models import IllusionType, RegionKind
 from dataset.samples import mask_name
+from dataset.tables import IllusionType, RegionKind
 
 UNSPECIFIED = "unspecified"
 TYPES = [t.value for t in IllusionType] + [UNSPECIFIED]

@@ -17,7 +17,8 @@ from core.formats import mask_to_rle
 from dataset.export.coco import pair_type, parse_mask_name
 from dataset.export.records import SampleRecord
 from dataset.media import MediaStore
-from dataset.models import (
+from dataset.samples import load_output
+from dataset.tables import (
     Annotation,
     Frame,
     FrameState,
@@ -29,7 +30,6 @@ from dataset.models import (
     SourceKind,
     Video,
 )
-from dataset.samples import load_output
 
 Outcome = Literal["added", "present", "conflict"]
 

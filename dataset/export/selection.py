@@ -19,7 +19,7 @@ from sqlalchemy.orm import Session
 from core.wording import quoted
 from dataset.export.errors import LayoutError
 from dataset.export.records import SampleRecord, VideoInfo
-from dataset.models import Annotation, Frame, Sample, SampleState, Video
+from dataset.tables import Annotation, Frame, Sample, SampleState, Video
 
 DEFAULT_STATES = ("accepted",)
 

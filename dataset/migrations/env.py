@@ -3,7 +3,7 @@
 from alembic import context
 
 from dataset.db import make_engine
-from dataset.models import Base
+from dataset.tables import Base
 
 config = context.config
 url = config.get_main_option("sqlalchemy.url")

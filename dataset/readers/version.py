@@ -60,7 +60,7 @@ def pin_dataset_version(session: Session, media: MediaStore, *, video_ids: Seque
     # and loads none of it.
     from sqlalchemy import select
 
-    from dataset.models import Video
+    from dataset.tables import Video
 
     filters = _filters(video_ids, illusion_types, kinds, qa_flags)
     videos = {row.id: row for row in session.execute(select(Video.id, Video.name, Video.source_kind, Video.illusion_types,
@@ -190,7 +190,7 @@ def _newest_accepted(session: Session, video_ids: list[int] | None) -> Iterator[
     """Accepted sample rows, the newest annotation version of each frame only, streamed in batches."""
     from sqlalchemy import select
 
-    from dataset.models import Annotation, Frame, Sample
+    from dataset.tables import Annotation, Frame, Sample
 
     query = (select(Sample.id, Sample.frame_id, Sample.annotation_version, Sample.files, Sample.params, Sample.provenance,
                     Sample.qa, Frame.index, Frame.video_id, Annotation.illusion_type)

@@ -18,13 +18,13 @@ from sqlalchemy.orm import Session
 from core.formats import FormatError
 from core.formats.rle import canonical_rle
 from core.wording import quoted
-from dataset.models import Annotation, Frame, FrameState, IllusionType, Region, RegionKind, User, utcnow
 from dataset.services import audit, proposals
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.frames import get_frame, update_frame
 from dataset.services.leases import ensure_annotation_row, held_by_other, release_lease, renew_lease
 from dataset.services.sample_review import returned_note, returned_waiting
 from dataset.services.validate import DB_INT_MAX, db_int
+from dataset.tables import Annotation, Frame, FrameState, IllusionType, Region, RegionKind, User, utcnow
 
 ANNOTATABLE = (FrameState.approved,)
 DELETE_REASONS = ("redundant", "imperceptible")

@@ -6,7 +6,7 @@ from typing import Any
 
 from sqlalchemy.orm import Session
 
-from dataset.models import AuditEntry
+from dataset.tables import AuditEntry
 
 
 def record(session: Session, user_id: int | None, action: str, target_kind: str,

@@ -12,11 +12,11 @@ from sqlalchemy.orm import Session
 
 from core.formats import mask_to_rle
 from dataset.media import MediaStore
-from dataset.models import Frame, FrameState, Sample, SampleState, User, Video
 from dataset.samples import load_output
 from dataset.services.annotate import save_annotation
 from dataset.services.review import review_frame
 from dataset.services.sample_review import review_sample
+from dataset.tables import Frame, FrameState, Sample, SampleState, User, Video
 
 APPROVE_PER_VIDEO = 6
 ANNOTATE_PER_VIDEO = 3

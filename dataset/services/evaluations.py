@@ -17,11 +17,11 @@ from sqlalchemy.orm import Session
 
 from core.wording import quoted
 from dataset.contained import REPORTS, contained_file, open_contained, owned_folder
-from dataset.models import Evaluation, EvaluationResult, Frame, Sample, User, Video
-from dataset.redact import shown
+from dataset.redact import redacted
 from dataset.services.dataset_roots import folder_label
 from dataset.services.errors import InvalidInput, NotFound
 from dataset.services.sample_review import sample_json
+from dataset.tables import Evaluation, EvaluationResult, Frame, Sample, User, Video
 
 SORT_REGIONS = ("all", "illusion")  # the regions with indexed columns
 SORT_METRICS = ("epe", "bad2")
@@ -103,7 +103,7 @@ def _clean(regions: dict[str, dict[str, Any]]) -> dict[str, dict[str, float | No
 def evaluation_json(evaluation: Evaluation) -> dict[str, Any]:
     job = evaluation.job
     return {"id": evaluation.id, "job": evaluation.job_id, "state": job.state.value if job else "unknown",
-            "progress": job.progress if job else None, "error": shown(job.error) if job else None,
+            "progress": job.progress if job else None, "error": redacted(job.error) if job else None,
             "created_by": evaluation.created_by.name if evaluation.created_by else None,
             "created_at": evaluation.created_at.isoformat() + "Z", "dataset": evaluation.dataset,
             "format": evaluation.params.get("format"), "methods": evaluation.params.get("methods", []),

@@ -26,11 +26,11 @@ from dataset.export import FORMATS, LayoutError, export_params, parse_split_spec
 from dataset.export.authors_layout import MASK_FORMATS
 from dataset.export.selection import parse_states
 from dataset.export.splits import DEFAULT_SPLIT
-from dataset.models import Export, Frame, Job, JobState, Sample, SampleState, User, Video, utcnow
-from dataset.redact import shown
+from dataset.redact import redacted
 from dataset.services import audit
 from dataset.services.errors import Conflict, FieldError, NotFound
 from dataset.settings import Settings
+from dataset.tables import Export, Frame, Job, JobState, Sample, SampleState, User, Video, utcnow
 
 # Files that are compressed already: stored as they are, the rest deflated.
 PACKED_SUFFIXES = frozenset({".png", ".jpg", ".jpeg"})
@@ -117,7 +117,7 @@ def export_json(export: Export) -> dict[str, Any]:
     return {
         "id": export.id, "job": export.job_id, "state": export_state(export),
         "progress": job.progress if job is not None else 0.0,
-        "error": shown(job.error) if job is not None else "its job is gone",
+        "error": redacted(job.error) if job is not None else "its job is gone",
         "samples": result.get("samples"), **export.options,
         "created_by": export.created_by.name if export.created_by else None,
         "created_at": export.created_at.isoformat() + "Z",

@@ -9,9 +9,9 @@ from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
 from core.wording import quoted
-from dataset.models import Frame, FrameCount, FrameState, Video, utcnow
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.paging import Page, keyset_page
+from dataset.tables import Frame, FrameCount, FrameState, Video, utcnow
 
 # Which states count as having reached each funnel stage (rejected/deleted frames drop out; of the
 # rejected ones, those the prefilter rejected never passed it, see funnel_counts).

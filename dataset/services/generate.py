@@ -31,13 +31,13 @@ from core.geometry import (
 from dataset.db import transaction
 from dataset.finite import finite_json
 from dataset.media import MediaStore
-from dataset.models import Annotation, Frame, FrameState, RegionKind, Sample, SampleState, Video, utcnow
 from dataset.samples import load_output, mask_name, store_outputs
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.frames import update_frame
 from dataset.services.inpaint import hole_filler
 from dataset.services.jobs import JobContext
 from dataset.settings import Settings
+from dataset.tables import Annotation, Frame, FrameState, RegionKind, Sample, SampleState, Video, utcnow
 from dataset.version import code_version
 
 GENERATABLE = (FrameState.annotated, FrameState.generated, FrameState.accepted)

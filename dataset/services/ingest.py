@@ -23,12 +23,12 @@ from core.wording import plural, quoted
 from dataset.capture.files import trailing_number
 from dataset.db import transaction
 from dataset.ingest import DecodedFrame, IngestError, dhash, hamming, open_source
-from dataset.models import Frame, IllusionType, SourceKind, Video
 from dataset.samples import store_outputs
 from dataset.services.errors import InvalidInput
 from dataset.services.jobs import JobContext
 from dataset.services.prefilter import launch_prefilter
 from dataset.services.scene_groups import join_scene_group
+from dataset.tables import Frame, IllusionType, SourceKind, Video
 from dataset.thumbnails import put_thumbnail
 
 DEFAULT_FPS = 2.0  # the paper's sampling rate

@@ -21,10 +21,10 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from dataset.db import transaction
 from dataset.media import MediaStore
-from dataset.models import Job, JobState, RunState, User, utcnow
-from dataset.redact import redactor_for, shown
+from dataset.redact import redacted, redactor_for
 from dataset.services.errors import Conflict, NotFound, ServiceError
 from dataset.settings import Settings
+from dataset.tables import Job, JobState, RunState, User, utcnow
 
 LOG_LIMIT = 200_000  # characters kept of a job's log; the head is dropped first
 HEARTBEAT_S = 10.0
@@ -67,19 +67,19 @@ def user_error(exc: BaseException, redact: Callable[[str], str]) -> str:
 def job_json(job: Job, *, with_log: bool = False) -> dict[str, Any]:
     """What answers say of a job. Its parameters and result (a command line's paths), its error and
     its log (tracebacks, a trainer's output) come from outside the app's own answers: shown through
-    :func:`dataset.redact.shown`, which keeps server paths out of a request's answer.
+    :func:`dataset.redact.redacted`, which keeps server paths out of a request's answer.
 
     ``state`` is the row's, except ``cancelled`` for the ended train job of a cancelled run (the row
     says failed: the handler raised); ``took_s``: the seconds every attempt ran, once it has ended."""
     data: dict[str, Any] = {
         "id": job.id, "kind": job.kind, "state": _state(job), "progress": job.progress,
-        "params": shown(job.params), "result": shown(job.result), "error": shown(job.error), "attempts": job.attempts,
+        "params": redacted(job.params), "result": redacted(job.result), "error": redacted(job.error), "attempts": job.attempts,
         "worker": job.worker, "created_by": job.created_by.name if job.created_by else None,
         "created_at": _iso(job.created_at), "started_at": _iso(job.started_at),
         "finished_at": _iso(job.finished_at), "took_s": _took_s(job),
     }
     if with_log:
-        data["log"] = shown(job.log)
+        data["log"] = redacted(job.log)
     return data
 
 

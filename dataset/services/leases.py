@@ -15,9 +15,9 @@ from sqlalchemy.dialects.postgresql import insert as postgresql_insert
 from sqlalchemy.dialects.sqlite import insert as sqlite_insert
 from sqlalchemy.orm import Session
 
-from dataset.models import Annotation, Frame, FrameState, Sample, SampleState, User, utcnow
 from dataset.services.errors import Conflict
 from dataset.services.frames import get_frame
+from dataset.tables import Annotation, Frame, FrameState, Sample, SampleState, User, utcnow
 
 PREFETCH = 5  # frames ahead of an annotator whose embeddings workers prepare
 

@@ -20,7 +20,7 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import InstrumentedAttribute, Session
 
 from dataset.media import MediaStore
-from dataset.models import Frame, Job, JobState, Sample, TrainingRun, Video
+from dataset.tables import Frame, Job, JobState, Sample, TrainingRun, Video
 
 # Every column that may hold media keys or media paths; a training run's pinned dataset version
 # keeps its files while the run exists (regenerating a sample cannot pull them away).

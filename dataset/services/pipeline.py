@@ -19,10 +19,10 @@ from typing import Any
 
 from sqlalchemy.orm import Session
 
-from dataset.models import Frame, Job, User
 from dataset.services import leases, proposals, segmentation
 from dataset.services.errors import Unavailable
 from dataset.settings import Settings
+from dataset.tables import Frame, Job, User
 
 Submit = Callable[[Session, str, dict[str, Any], User | None], Job]
 

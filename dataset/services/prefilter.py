@@ -22,11 +22,11 @@ from sqlalchemy.orm import Session
 from annotation.vlm import KeepRule, PrefilterBackend, Verdict, make_backend, sparse_expand, sparse_samples, sparse_step
 from core.wording import plural
 from dataset.db import transaction
-from dataset.models import Frame, FrameState, Job, JobState, PrefilterResult, User, Video
 from dataset.services.errors import Conflict, InvalidInput
 from dataset.services.frames import update_frame
 from dataset.services.jobs import JobContext
 from dataset.settings import Settings
+from dataset.tables import Frame, FrameState, Job, JobState, PrefilterResult, User, Video
 
 Submit = Callable[[Session, str, dict[str, Any], User | None], Job]
 CHUNK = 32  # frames per job: small enough to spread over workers, large enough to batch the VLM

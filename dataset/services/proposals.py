@@ -33,7 +33,14 @@ from annotation.proposals.base import ProposalError, mask_iou
 from annotation.proposals.plane_break import SCORE_FLOOR
 from core.formats import mask_to_rle, rle_to_mask
 from dataset.db import transaction
-from dataset.models import (
+from dataset.services.errors import Conflict, InvalidInput, NotFound
+from dataset.services.generate import GenerationError, mono_disparity
+from dataset.services.jobs import JobContext
+from dataset.services.leases import held_by_other
+from dataset.services.prefilter import backend_for
+from dataset.services.segmentation import frames_coming, load_rgb, settings_segmenter
+from dataset.settings import Settings
+from dataset.tables import (
     Annotation,
     Frame,
     FrameState,
@@ -47,13 +54,6 @@ from dataset.models import (
     Video,
     utcnow,
 )
-from dataset.services.errors import Conflict, InvalidInput, NotFound
-from dataset.services.generate import GenerationError, mono_disparity
-from dataset.services.jobs import JobContext
-from dataset.services.leases import held_by_other
-from dataset.services.prefilter import backend_for
-from dataset.services.segmentation import frames_coming, load_rgb, settings_segmenter
-from dataset.settings import Settings
 
 MATCH_IOU = 0.5  # a submitted illusion counts as found by a proposer when one of its proposals overlaps it this much
 LINK = "proposal_id"  # the click entry that ties a submitted pair to the proposal it was accepted from

@@ -9,12 +9,12 @@ from typing import Any
 from sqlalchemy import ColumnElement, Select, and_, func, select
 from sqlalchemy.orm import Session
 
-from dataset.models import Frame, FrameState, PrefilterResult, Review, ReviewDecision, User
 from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound, ServiceError
 from dataset.services.frames import FRAME_ORDER, frame_json, frame_total, update_frame
 from dataset.services.paging import bounded_count, keyset_page
 from dataset.services.validate import db_int, reason_text
+from dataset.tables import Frame, FrameState, PrefilterResult, Review, ReviewDecision, User
 
 REJECT_REASONS = ("blurry", "occluded", "no illusion", "watermark", "duplicate")
 

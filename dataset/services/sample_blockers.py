@@ -16,9 +16,9 @@ from typing import Any
 from sqlalchemy import Select, func, select
 from sqlalchemy.orm import Session
 
-from dataset.models import Annotation, Frame, FrameState, Job, JobState, Video
-from dataset.redact import shown
+from dataset.redact import redacted
 from dataset.settings import Settings
+from dataset.tables import Annotation, Frame, FrameState, Job, JobState, Video
 
 GENERATE_JOB = "generate"
 
@@ -72,7 +72,7 @@ def failed_generate(session: Session, frame: Frame) -> dict[str, Any] | None:
 
 def _failure_json(job: Job) -> dict[str, Any]:
     # A job's error comes from outside the app's own answers (tracebacks, paths): shown as job answers show it.
-    return {"job_id": job.id, "error": shown(job.error),
+    return {"job_id": job.id, "error": redacted(job.error),
             "finished_at": job.finished_at.isoformat() + "Z" if job.finished_at else None}
 
 
@@ -98,7 +98,7 @@ def failed_generates_of(session: Session, user_id: int, *, other_than: int | Non
     query = _failed_last_jobs().join(Annotation, Annotation.frame_id == Frame.id).where(Annotation.user_id == user_id)
     if other_than is not None:
         query = query.where(Frame.id != other_than)
-    return [{"frame_id": fid, "job_id": job.id, "error": shown(job.error)}
+    return [{"frame_id": fid, "job_id": job.id, "error": redacted(job.error)}
             for fid, job in session.execute(query.limit(limit)).all()]
 
 

@@ -8,7 +8,13 @@ from typing import Any
 from sqlalchemy import func, or_, select
 from sqlalchemy.orm import Session
 
-from dataset.models import (
+from dataset.redact import redacted
+from dataset.services import audit
+from dataset.services.errors import Conflict, InvalidInput, NotFound
+from dataset.services.frames import update_frame
+from dataset.services.paging import Page, keyset_page
+from dataset.services.validate import REASON_CHARS, optional_text, reason_text
+from dataset.tables import (
     Annotation,
     AuditEntry,
     Frame,
@@ -20,12 +26,6 @@ from dataset.models import (
     Video,
     utcnow,
 )
-from dataset.redact import shown
-from dataset.services import audit
-from dataset.services.errors import Conflict, InvalidInput, NotFound
-from dataset.services.frames import update_frame
-from dataset.services.paging import Page, keyset_page
-from dataset.services.validate import REASON_CHARS, optional_text, reason_text
 
 # What curators most often find wrong with a generated sample (the reject reason picker).
 REJECT_REASONS = ("surface not flat", "mask misses the illusion", "wrong support region", "bad right view",
@@ -43,7 +43,7 @@ def sample_json(sample: Sample, frame: Frame, video: Video) -> dict[str, Any]:
         "id": sample.id, "frame_id": frame.id, "video_id": video.id, "video": video.name, "index": frame.index,
         "time_s": frame.time_s, "width": frame.width, "height": frame.height, "state": sample.state.value,
         "flagged": sample.flagged, "annotation_version": sample.annotation_version, "files": sample.files,
-        "params": sample.params, "provenance": shown(sample.provenance), "qa": sample.qa,
+        "params": sample.params, "provenance": redacted(sample.provenance), "qa": sample.qa,
         "created_at": sample.created_at.isoformat() + "Z",
     }
 

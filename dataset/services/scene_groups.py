@@ -13,7 +13,7 @@ from sqlalchemy import or_, select, update
 from sqlalchemy.orm import Session
 
 from dataset.ingest.copies import find_copies
-from dataset.models import Frame, Video
+from dataset.tables import Frame, Video
 
 _BATCH = 5000  # frame rows streamed at a time
 

@@ -20,12 +20,12 @@ from annotation.segment.cache import cached_embedding
 from core.formats import FormatError, mask_to_rle, rle_to_mask
 from dataset.db import transaction
 from dataset.media import MediaStore
-from dataset.models import Annotation, Frame, FrameState, Job, JobState, Region, RegionKind, utcnow
 from dataset.services.errors import InvalidInput
 from dataset.services.frames import get_frame
 from dataset.services.jobs import JobContext
 from dataset.services.leases import ensure_annotation_row, held_by_other
 from dataset.settings import Settings
+from dataset.tables import Annotation, Frame, FrameState, Job, JobState, Region, RegionKind, utcnow
 
 
 @lru_cache(maxsize=2)

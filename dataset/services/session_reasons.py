@@ -12,7 +12,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from core.wording import plural
-from dataset.models import AuditEntry, User, utcnow
+from dataset.tables import AuditEntry, User, utcnow
 
 # The account changes that end every session of their user (dataset/services/users.py), and what
 # each one means for its user.

@@ -13,7 +13,7 @@ from datetime import timedelta
 from sqlalchemy import delete
 from sqlalchemy.orm import Session
 
-from dataset.models import User, UserSession, utcnow
+from dataset.tables import User, UserSession, utcnow
 
 TOUCH_EVERY = timedelta(minutes=1)  # at most one write a minute per session, not one per click
 

@@ -27,13 +27,13 @@ from core.wording import quoted
 from dataset.contained import LinkedFolder, owned_folder
 from dataset.export.splits import MIN_FRACTION, parse_split_spec, split_of
 from dataset.media import MediaStore
-from dataset.models import Frame, IllusionType, JobState, RunState, Sample, SampleState, TrainingMetric, TrainingRun, User, utcnow
 from dataset.readers import READER_FORMATS, open_reader
 from dataset.readers.version import pin_dataset_version, split_by_video, version_counts, version_media_keys
-from dataset.redact import shown
+from dataset.redact import redacted
 from dataset.run_layout import INIT_FILE
 from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
+from dataset.tables import Frame, IllusionType, JobState, RunState, Sample, SampleState, TrainingMetric, TrainingRun, User, utcnow
 
 SPLITS = ("train", "val", "test")
 DEFAULT_SPLIT = "train=0.8,val=0.1,test=0.1"
@@ -338,7 +338,7 @@ def run_json(run: TrainingRun, runs_dir: Path, *, current: dict[str, Any] | None
     duration = ((run.finished_at or utcnow()) - run.started_at).total_seconds() if run.started_at else None
     state = effective_state(run)
     # The engine's own words (an exception's) or the job's error: either may quote a server path.
-    reason = shown(run.reason or (run.job.error if state != run.state and run.job is not None else None))
+    reason = redacted(run.reason or (run.job.error if state != run.state and run.job is not None else None))
     data: dict[str, Any] = {
         "run": run.id, "job": run.job_id, "state": state.value, "preset": run.preset,
         "step": run.step, "steps": run.steps or run.config.get("train", {}).get("steps", 0),
@@ -352,7 +352,7 @@ def run_json(run: TrainingRun, runs_dir: Path, *, current: dict[str, Any] | None
         "dataset": {"id": run.dataset_id, "samples": len(run.dataset.get("items", [])),
                     "kinds": kind_counts(run.dataset), "filters": run.dataset.get("filters", {}),
                     "splits": {name: len(ids) for name, ids in run.splits.items()}},
-        "launch": shown(run.launch), "run_dir": f"runs/{run.id}",
+        "launch": redacted(run.launch), "run_dir": f"runs/{run.id}",
         "current": bool(current and current.get("run") == run.id),
         "created_by": run.created_by.name if run.created_by else None,
         "created_at": _iso(run.created_at), "started_at": _iso(run.started_at),
@@ -362,7 +362,7 @@ def run_json(run: TrainingRun, runs_dir: Path, *, current: dict[str, Any] | None
         data["init"] = init_report(directory, run.launch["init_stereo"])
     if full:
         files = checkpoint_files(directory) if directory is not None else []
-        data.update(config=shown(run.config), version=run.dataset, splits=run.splits,
+        data.update(config=redacted(run.config), version=run.dataset, splits=run.splits,
                     checkpoints=[{k: v for k, v in f.items() if k != "path"} for f in files])
     return data
 

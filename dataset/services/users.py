@@ -19,11 +19,11 @@ from sqlalchemy.orm import Session
 from werkzeug.security import check_password_hash, generate_password_hash
 
 from core.wording import plural, quoted
-from dataset.models import ApiToken, Role, User, utcnow
 from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.services.sessions import end_user_sessions
 from dataset.services.validate import DB_INT_MAX
+from dataset.tables import ApiToken, Role, User, utcnow
 
 _NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")  # always fullmatch: "$" would let "admin\n" through
 MIN_PASSWORD = 8

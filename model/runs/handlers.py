@@ -20,10 +20,10 @@ from typing import Any
 from sqlalchemy.orm import Session
 
 from dataset.db import transaction
-from dataset.models import Job, JobState, RunState, TrainingRun, utcnow
 from dataset.services import training
 from dataset.services.errors import FieldError, InvalidInput, ServiceError
 from dataset.services.jobs import JobContext
+from dataset.tables import Job, JobState, RunState, TrainingRun, utcnow
 from model.presets import ALL_PRESETS, Config, load_preset
 from model.runs.capacity import check_worker
 from model.runs.evaluation import evaluate_job

@@ -15,8 +15,8 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from dataset.models import TrainingMetric, TrainingRun
 from dataset.services.training import effective_state
+from dataset.tables import TrainingMetric, TrainingRun
 from model.presets import load_preset
 from model.runs.schema import RunLaunch
 

@@ -28,12 +28,12 @@ from pydantic import (
 )
 
 from dataset.export.splits import MIN_FRACTION
-from dataset.models import IllusionType
 from dataset.readers import READER_FORMATS
 from dataset.services.errors import FieldError, InvalidInput
 from dataset.services.training import DEFAULT_SPLIT, SAMPLE_KINDS, parse_split
 from dataset.services.validate import DB_INT_MAX
 from dataset.settings import DATASET_ROOT_NAME
+from dataset.tables import IllusionType
 from model.align import ALIGN_RULES
 from model.evaluate import RESOLUTIONS
 from model.methods import METHODS, NETWORK_METHODS, method_key

@@ -7,11 +7,11 @@ from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
 from core.formats import FormatError, mask_to_rle, rle_to_mask
-from dataset.models import Frame, RegionKind, Role, User
 from dataset.services import annotate, leases, pipeline, proposals, sample_blockers, sample_review, segmentation
 from dataset.services import jobs as job_service
 from dataset.services.errors import InvalidInput, NotFound
 from dataset.services.validate import db_int, optional_text
+from dataset.tables import Frame, RegionKind, Role, User
 from webapp.api.blueprint import api, get_or_404, json_body
 from webapp.auth import requires
 from webapp.memory import give_back_after_request

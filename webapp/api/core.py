@@ -10,7 +10,6 @@ from flask_login import current_user
 from sqlalchemy import select
 from sqlalchemy.orm import defer, joinedload
 
-from dataset.models import Job, JobState, Role, User
 from dataset.services import jobs as job_service
 from dataset.services import sample_blockers, training
 from dataset.services import users as user_service
@@ -19,6 +18,7 @@ from dataset.services.frames import frames_page, funnel_counts, parse_state
 from dataset.services.paging import keyset_page
 from dataset.services.proposals import proposer_stats
 from dataset.services.validate import optional_text
+from dataset.tables import Job, JobState, Role, User
 from webapp.api.blueprint import api, cursor_args, int_arg, json_body
 from webapp.api.openapi import openapi_document
 from webapp.auth import requires

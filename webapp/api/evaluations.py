@@ -8,8 +8,8 @@ from flask import Response, g
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
-from dataset.models import Role, User
 from dataset.services import evaluations
+from dataset.tables import Role, User
 from model.runs.evaluation import evaluation_params
 from model.runs.schema import EvaluationLaunch, validate
 from webapp.api.blueprint import api, json_body

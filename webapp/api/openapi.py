@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from dataset.models import IllusionType
 from dataset.services.users import MAX_PASSWORD, MIN_PASSWORD
+from dataset.tables import IllusionType
 from model.runs.schema import openapi_schemas
 
 

@@ -7,11 +7,11 @@ from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
 from annotation.vlm import QUESTION_LABELS
-from dataset.models import Role, User
 from dataset.services import pipeline, sample_blockers
 from dataset.services import review as review_service
 from dataset.services.errors import Conflict
 from dataset.services.validate import db_int, optional_text
+from dataset.tables import Role, User
 from webapp.api.blueprint import api, cursor_args, int_arg, json_body
 from webapp.auth import requires
 from webapp.runtime import runtime

@@ -9,8 +9,8 @@ from flask import g, request
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
-from dataset.models import Role, User
 from dataset.services import training
+from dataset.tables import Role, User
 from model.runs import registry, run_length
 from model.runs.schema import FieldError, RunLaunch, validate
 from webapp.api.blueprint import api, id_list_arg, int_arg, json_body

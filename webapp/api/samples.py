@@ -6,11 +6,11 @@ from flask import g, request
 from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
-from dataset.models import Role, Sample, User
 from dataset.services import evaluations, pipeline, sample_review
 from dataset.services import jobs as job_service
 from dataset.services.errors import InvalidInput
 from dataset.services.validate import optional_text
+from dataset.tables import Role, Sample, User
 from webapp.api.blueprint import api, cursor_args, get_or_404, int_arg, json_body
 from webapp.auth import requires
 from webapp.runtime import runtime

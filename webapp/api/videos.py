@@ -12,7 +12,6 @@ from sqlalchemy import func, select
 
 from annotation.vlm import BACKEND_NAMES
 from dataset.ingest.sources import VIDEO_EXTENSIONS, image_kind
-from dataset.models import FrameCount, Role, User, Video
 from dataset.services import jobs as job_service
 from dataset.services.errors import InvalidInput
 from dataset.services.ingest import DEFAULT_DEDUP_HAMMING, ingest_params, mono_index
@@ -20,6 +19,7 @@ from dataset.services.paging import keyset_page
 from dataset.services.prefilter import launch_prefilter
 from dataset.services.sample_blockers import sample_blocker
 from dataset.services.validate import db_int
+from dataset.tables import FrameCount, Role, User, Video
 from webapp.api.blueprint import api, cursor_args, int_arg, json_body
 from webapp.auth import requires
 from webapp.bodies import MIB, size_text

@@ -23,12 +23,12 @@ from sqlalchemy.engine import make_url
 
 from core.wording import plural
 from dataset.db import make_engine, transaction
-from dataset.models import Frame, FrameState, JobState, Role, RunState, TrainingRun, User, Video
 from dataset.services import jobs as job_service
 from dataset.services import users as user_service
 from dataset.services.errors import ServiceError
 from dataset.services.ingest import ingest_params
 from dataset.settings import HOME_ENV, SettingsError, load_settings
+from dataset.tables import Frame, FrameState, JobState, Role, RunState, TrainingRun, User, Video
 from webapp.cli.state import CliState, pass_state
 from webapp.cli.workspace import init_workspace, make_server, server_url
 from webapp.runtime import Runtime

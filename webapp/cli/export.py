@@ -12,9 +12,9 @@ from dataset.export.authors_layout import MASK_FORMATS
 from dataset.export.selection import DEFAULT_STATES
 from dataset.export.splits import DEFAULT_SPLIT
 from dataset.export.staging import check_target
-from dataset.models import SampleState
 from dataset.services.errors import FieldError
 from dataset.services.exports import check_selection
+from dataset.tables import SampleState
 from webapp.cli.errors import service_errors
 from webapp.cli.running import run_job, run_options
 from webapp.cli.state import CliState, pass_state

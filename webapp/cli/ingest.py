@@ -14,10 +14,10 @@ from core.wording import plural
 from dataset.db import transaction
 from dataset.ingest import IngestError, find_sources
 from dataset.ingest.sources import SCENE_FILE
-from dataset.models import FrameState, IllusionType, Job, SourceKind, Video
 from dataset.services.frames import list_frames
 from dataset.services.ingest import DEFAULT_DEDUP_HAMMING, DEFAULT_FPS, ingest_params
 from dataset.services.sample_blockers import sample_blocker
+from dataset.tables import FrameState, IllusionType, Job, SourceKind, Video
 from webapp.cli.errors import service_errors
 from webapp.cli.state import CliState, pass_state
 

@@ -9,9 +9,9 @@ import click
 from sqlalchemy import select
 
 from dataset.db import transaction
-from dataset.models import Job
 from dataset.services import jobs as job_service
 from dataset.services import training
+from dataset.tables import Job
 from webapp.cli.errors import service_errors
 from webapp.cli.state import CliState, pass_state
 from webapp.jobs import runs as run_control

@@ -11,8 +11,8 @@ from typing import Any
 import click
 
 from dataset.db import transaction
-from dataset.models import IllusionType
 from dataset.services import training
+from dataset.tables import IllusionType
 from model.presets import ALL_PRESETS, load_preset
 from model.runs import registry
 from model.runs.launcher import engine_options

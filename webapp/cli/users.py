@@ -11,8 +11,8 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from dataset.db import transaction
-from dataset.models import Role, User
 from dataset.services import users as user_service
+from dataset.tables import Role, User
 from webapp.cli.errors import service_errors
 from webapp.cli.state import CliState, pass_state
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataset.capture import import_capture_job, import_reconstruction_job
-from dataset.export.jobs import export_job, import_job
+from dataset.export.handlers import export_job, import_job
 from dataset.services.generate import generate_job
 from dataset.services.ingest import ingest_video
 from dataset.services.jobs import Handler

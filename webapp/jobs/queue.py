@@ -14,9 +14,9 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from dataset.contained import resolve_storage
 from dataset.db import transaction
-from dataset.models import Job, JobState, User
 from dataset.services import jobs as job_rows
 from dataset.services.errors import Unavailable
+from dataset.tables import Job, JobState, User
 from webapp.jobs.handlers import HANDLERS
 
 if TYPE_CHECKING:

@@ -12,11 +12,11 @@ from typing import TYPE_CHECKING, Any
 from sqlalchemy.orm import Session
 
 from dataset.db import transaction
-from dataset.models import JobState, TrainingRun, User
 from dataset.services import audit, training
 from dataset.services import jobs as job_rows
 from dataset.services.dataset_roots import folder_label, resolve_folder
 from dataset.services.errors import Conflict, InvalidInput, NotFound
+from dataset.tables import JobState, TrainingRun, User
 from model.presets import Config, ModelConfig
 from model.runs import launcher, registry
 from model.runs.capacity import check_fit, train_device

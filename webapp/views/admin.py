@@ -15,9 +15,9 @@ from flask_login import current_user
 from sqlalchemy import select
 
 from core.wording import plural
-from dataset.models import Role, User
 from dataset.services import users as user_service
 from dataset.services.errors import ServiceError
+from dataset.tables import Role, User
 from webapp.api.blueprint import get_or_404
 from webapp.auth import requires
 from webapp.forms import CreateUserForm

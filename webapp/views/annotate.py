@@ -5,8 +5,8 @@ from __future__ import annotations
 from flask import Blueprint, render_template
 from flask.typing import ResponseReturnValue
 
-from dataset.models import IllusionType, Role
 from dataset.services.annotate import DELETE_REASONS
+from dataset.tables import IllusionType, Role
 from webapp.auth import requires
 from webapp.runtime import runtime
 

@@ -12,9 +12,9 @@ from markupsafe import escape
 from sqlalchemy import select
 
 from core.wording import plural
-from dataset.models import Role, utcnow
 from dataset.services import users as user_service
 from dataset.services.session_reasons import why_session_ended
+from dataset.tables import Role, utcnow
 from webapp.auth import public, requires, sign_in, sign_out
 from webapp.forms import LoginForm
 from webapp.runtime import runtime

@@ -5,10 +5,10 @@ from __future__ import annotations
 from flask import Blueprint, g, render_template, request
 from flask.typing import ResponseReturnValue
 
-from dataset.models import FrameState, Role, Video
 from dataset.services.frames import FUNNEL_MEANINGS, FUNNEL_STAGES, funnel_counts
 from dataset.services.sample_blockers import blocked_videos, failed_generate_count, sample_blocker
 from dataset.services.validate import DB_INT_MAX
+from dataset.tables import FrameState, Role, Video
 from webapp.auth import requires
 from webapp.runtime import runtime
 

@@ -17,7 +17,6 @@ from flask.typing import ResponseReturnValue
 
 from core.formats import decode_pfm
 from core.wording import quoted
-from dataset.models import Evaluation, Role, Sample
 from dataset.preview.evaluation_maps import EVALUATION_IMAGES, evaluation_image
 from dataset.preview.images import encode_png
 from dataset.readers import READER_FORMATS
@@ -25,6 +24,7 @@ from dataset.readers.base import resize_disparity
 from dataset.samples import load_output
 from dataset.services import evaluations, sample_review, training
 from dataset.services.errors import NotFound
+from dataset.tables import Evaluation, Role, Sample
 from model.align import ALIGN_RULES
 from model.evaluate import RESOLUTIONS
 from model.methods import METHODS

@@ -20,10 +20,10 @@ from dataset.export import FORMATS
 from dataset.export.authors_layout import MASK_FORMATS
 from dataset.export.selection import DEFAULT_STATES
 from dataset.export.splits import DEFAULT_SPLIT
-from dataset.models import Role, SampleState, User, Video
 from dataset.services import exports
 from dataset.services.errors import Conflict, FieldError
 from dataset.services.validate import DB_INT_MAX
+from dataset.tables import Role, SampleState, User, Video
 from webapp.auth import requires
 from webapp.runtime import runtime
 

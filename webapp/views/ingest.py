@@ -6,8 +6,8 @@ from flask import Blueprint, render_template
 from flask.typing import ResponseReturnValue
 
 from dataset.ingest.sources import VIDEO_EXTENSIONS
-from dataset.models import IllusionType, Role, SourceKind
 from dataset.services.sample_blockers import sample_blocker
+from dataset.tables import IllusionType, Role, SourceKind
 from webapp.auth import requires
 from webapp.runtime import runtime
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 from flask import Blueprint, g, render_template
 from flask.typing import ResponseReturnValue
 
-from dataset.models import Job, JobState, Role
 from dataset.services.errors import NotFound
+from dataset.tables import Job, JobState, Role
 from webapp.api.core import _visible_jobs  # the API's rule of who sees which job, not a copy of it
 from webapp.auth import requires
 

@@ -6,7 +6,7 @@ from flask import Blueprint, abort, send_file
 from flask.typing import ResponseReturnValue
 
 from dataset.media import MediaKeyError
-from dataset.models import Role
+from dataset.tables import Role
 from webapp.auth import requires
 from webapp.runtime import runtime
 

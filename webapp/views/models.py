@@ -14,9 +14,9 @@ from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
 from dataset.contained import open_contained
-from dataset.models import IllusionType, Role, Video
 from dataset.readers import READER_FORMATS
 from dataset.services import run_logs, training
+from dataset.tables import IllusionType, Role, Video
 from model.presets import ALL_PRESETS, load_preset
 from model.runs import registry, run_length
 from model.runs.capacity import suggest_crop

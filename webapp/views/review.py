@@ -6,8 +6,8 @@ from flask import Blueprint, g, render_template, request
 from flask.typing import ResponseReturnValue
 
 from annotation.vlm import QUESTION_LABELS, answered_questions
-from dataset.models import Role, Video
 from dataset.services.review import REJECT_REASONS
+from dataset.tables import Role, Video
 from webapp.auth import requires
 from webapp.runtime import runtime
 

@@ -16,12 +16,12 @@ from flask.typing import ResponseReturnValue
 from flask_login import current_user
 
 from core.wording import quoted
-from dataset.models import Frame, Role, SampleState
 from dataset.preview import images, qa
 from dataset.preview.cache import RenderCache
 from dataset.preview.sample_preview import STAGES, SamplePreview
 from dataset.services import evaluations, sample_review
 from dataset.services.validate import REASON_CHARS
+from dataset.tables import Frame, Role, SampleState
 from webapp.auth import requires
 from webapp.runtime import runtime
 
