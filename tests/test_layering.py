@@ -129,3 +129,19 @@ def test_the_engine_loads_no_database_layer() -> None:
     result = subprocess.run([sys.executable, "-c", code, *args], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
     assert result.stdout.split() == [], f"the trainer loads {result.stdout.split()}"
+
+
+def test_the_run_directorys_files_are_named_once() -> None:
+    """dataset/run_layout.py names them; the engine and the product import the names."""
+    import re
+
+    from dataset import run_layout
+
+    names = [value for key, value in vars(run_layout).items() if key.isupper() and isinstance(value, str)]
+    # a file name anywhere; a folder's name (a common word: "logs", "cancel") where a run's directory is joined with it
+    literal = re.compile("|".join(rf"[\"']{re.escape(name)}[\"']" if "." in name
+                                  else rf"\b(run|run_dir|directory)\s*/\s*[\"']{re.escape(name)}[\"']" for name in names))
+    offenders = [f"{path.relative_to(ROOT)}: {found.group(0)}" for package in ("model", "dataset", "webapp")
+                 for path in (ROOT / package).rglob("*.py") if path.name != "run_layout.py"
+                 for found in literal.finditer(path.read_text(encoding="utf-8"))]
+    assert len(names) >= 8 and offenders == []

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import BinaryIO
 
 from dataset.contained import open_contained
+from dataset.run_layout import LOG_DIR
 
 RANK = "0"
 STREAMS = ("stdout.log", "stderr.log")
@@ -53,7 +54,7 @@ def _open_rank0(run_dir: Path, stack: ExitStack) -> Opened:
 
 def _candidates(run_dir: Path) -> list[Path]:
     """The names rank 0's log files have, in order, whatever they are (the listing only: nothing is read)."""
-    logs = run_dir / "logs"
+    logs = run_dir / LOG_DIR
     if not logs.is_dir() or logs.is_symlink():
         return []
     return [attempt / RANK / stream

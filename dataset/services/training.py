@@ -30,7 +30,7 @@ from dataset.media import MediaStore
 from dataset.readers import READER_FORMATS, open_reader
 from dataset.readers.version import pin_dataset_version, split_by_video, version_counts, version_media_keys
 from dataset.redact import redacted
-from dataset.run_layout import INIT_FILE
+from dataset.run_layout import BEST_NAME, CHECKPOINT_DIR, INIT_FILE, RUN_FILE
 from dataset.services import audit
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from dataset.tables import Frame, IllusionType, JobState, RunState, Sample, SampleState, TrainingMetric, TrainingRun, User, utcnow
@@ -255,7 +255,7 @@ def write_run_json(directory: Path, run: TrainingRun, media_root: Path, *, data_
     doc = {"config": run.config, "dataset": run.dataset, "splits": run.splits, "media_root": str(media_root),
            "init_checkpoint": init_checkpoint, "init_stereo": init_stereo, "data": data, "run": run.id,
            "device": engine_device(run.launch.get("devices", "auto"))}
-    atomic_write_bytes(directory / "run.json", json.dumps(doc, indent=1).encode())
+    atomic_write_bytes(directory / RUN_FILE, json.dumps(doc, indent=1).encode())
 
 
 def engine_device(devices: str) -> str | None:
@@ -269,7 +269,7 @@ def engine_device(devices: str) -> str | None:
 def test_split(runs_dir: Path, run_id: int) -> list[Any]:
     """The held-out test split of a run (its ``run.json``'s sample ids or names); InvalidInput when
     it has none, so an evaluation says why before it starts."""
-    path = run_dir(runs_dir, run_id) / "run.json"
+    path = run_dir(runs_dir, run_id) / RUN_FILE
     if not path.is_file():
         raise InvalidInput(f"run {run_id} has no run.json")
     test = json.loads(path.read_text(encoding="utf-8")).get("splits", {}).get("test") or []
@@ -311,7 +311,7 @@ def checkpoint_files(directory: Path) -> list[dict[str, Any]]:
     """The run's checkpoint files, newest step first, then the best ones: name, step (None for
     ``best.pt``, whose step is the run's ``best_step``), bytes and path (never for answers).
     Symbolic links and files of other names are not the run's checkpoints."""
-    folder = directory / "checkpoints"
+    folder = directory / CHECKPOINT_DIR
     if folder.is_symlink():  # a planted link could point anywhere (run_dir refuses the run's own folder as one)
         return []
     found = []
@@ -333,7 +333,7 @@ def run_json(run: TrainingRun, runs_dir: Path, *, current: dict[str, Any] | None
     except LinkedFolder:  # the row is still shown, none of the files the link leads to
         directory = None
     last = directory / run.last_checkpoint if directory and run.last_checkpoint else None
-    best = directory / "checkpoints" / "best.pt" if directory else None
+    best = directory / CHECKPOINT_DIR / BEST_NAME if directory else None
     # Answers name files inside the run's folder, never by their server path.
     duration = ((run.finished_at or utcnow()) - run.started_at).total_seconds() if run.started_at else None
     state = effective_state(run)

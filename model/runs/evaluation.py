@@ -16,6 +16,7 @@ from dataset.contained import storage_root
 from dataset.db import transaction
 from dataset.readers import StereoSample, open_reader, resize_sample
 from dataset.readers.version import VersionReader
+from dataset.run_layout import CHECKPOINT_DIR, RUN_FILE
 from dataset.services import evaluations, training
 from dataset.services.dataset_roots import resolve_folder
 from dataset.services.errors import InvalidInput, NotFound
@@ -155,7 +156,7 @@ def _outside(path: Path, settings: Any) -> dict[str, Any]:
     path = Path(path).resolve()
     ref: dict[str, Any] = {"path": str(path)}
     run_dir = path.parent.parent
-    if path.parent.name == "checkpoints" and run_dir.parent == storage_root(settings.runs_dir) \
+    if path.parent.name == CHECKPOINT_DIR and run_dir.parent == storage_root(settings.runs_dir) \
             and run_dir.name.isdigit():
         ref["run"] = int(run_dir.name)
     return ref
@@ -205,7 +206,7 @@ def open_samples(params: dict[str, Any], settings: Any) -> Any:
     folder = folder_of(params["data"], settings)
     if folder is not None:
         return open_reader(params["format"], folder, **params["reader_options"])
-    run = json.loads((training.run_dir(settings.runs_dir, int(params["run"])) / "run.json").read_text())
+    run = json.loads((training.run_dir(settings.runs_dir, int(params["run"])) / RUN_FILE).read_text())
     test_ids = training.test_split(settings.runs_dir, int(params["run"]))
     return VersionReader(run["dataset"], settings.media_root, sample_ids=test_ids)
 

@@ -20,6 +20,7 @@ from typing import Any
 from sqlalchemy.orm import Session
 
 from dataset.db import transaction
+from dataset.run_layout import PROGRESS_FILE
 from dataset.services import training
 from dataset.services.errors import FieldError, InvalidInput, ServiceError
 from dataset.services.jobs import JobContext
@@ -273,7 +274,7 @@ def _mirror(ctx: JobContext, run_id: int, directory: Path, offset: int,
             end: dict[str, Any] | None) -> tuple[dict[str, Any] | None, int, bool, list[dict[str, Any]]]:
     """Apply new progress events; returns the end event (if seen), the new offset, whether cancel
     was asked and the new events."""
-    events, offset = training.read_events(directory / "progress.jsonl", offset)
+    events, offset = training.read_events(directory / PROGRESS_FILE, offset)
     with transaction(ctx.sessions) as s:
         run = training.get_run(s, run_id)
         end = training.apply_events(s, run, events) or end

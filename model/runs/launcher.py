@@ -31,11 +31,10 @@ from pathlib import Path
 from typing import Any
 
 from core.atomic import atomic_write_bytes
-from model.train import CANCEL_FILE
+from dataset.run_layout import CANCEL_FILE, LOG_DIR, TRAINERS_FILE
 
 PROJECT_ROOT = Path(__file__).resolve().parents[2]
 STOP_GRACE_S = 10.0
-TRAINERS_FILE = "trainers.json"
 
 
 def torchrun_command(run_dir: Path, launch: dict[str, Any], *, watch_pid: int,
@@ -53,7 +52,7 @@ def torchrun_command(run_dir: Path, launch: dict[str, Any], *, watch_pid: int,
     else:
         agent = ["model.train.agent"]
     return [sys.executable, "-m", *agent, "--nproc-per-node", str(int(launch.get("nproc") or 1)),
-            "--log-dir", str(run_dir / "logs"), "--tee", "3", "--local-ranks-filter", "0",
+            "--log-dir", str(run_dir / LOG_DIR), "--tee", "3", "--local-ranks-filter", "0",
             "-m", "model.train", str(run_dir), *engine_options(backbones or {}),
             "--watch-pid", str(watch_pid), "--watch-parent"]
 

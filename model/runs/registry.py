@@ -32,6 +32,7 @@ from sqlalchemy.orm import Session
 
 from core.atomic import atomic_write_bytes
 from dataset.contained import LinkedFolder, open_contained
+from dataset.run_layout import RUN_FILE
 from dataset.services import training
 from dataset.services.errors import Conflict, InvalidInput, NotFound
 from model.train import BEST_NAME, CHECKPOINT_DIR, KEEP_FILE
@@ -355,7 +356,7 @@ def keep_checkpoint(checkpoint: Path) -> None:
     """
     checkpoint = Path(checkpoint).resolve()
     run_dir = checkpoint.parent.parent
-    if checkpoint.parent.name != CHECKPOINT_DIR or not (run_dir / "run.json").is_file():
+    if checkpoint.parent.name != CHECKPOINT_DIR or not (run_dir / RUN_FILE).is_file():
         return
     path = run_dir / KEEP_FILE
     with (run_dir / f"{KEEP_FILE}.lock").open("a") as lock:

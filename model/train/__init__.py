@@ -3,6 +3,9 @@
 Torch-free at import, so the product can read the exit codes without loading torch.
 """
 
+# The run directory's names, shared with the product: re-exported here for the engine's modules.
+from dataset.run_layout import BEST_NAME, CANCEL_FILE, CHECKPOINT_DIR, KEEP_FILE  # noqa: F401
+
 EXIT_SUCCEEDED = 0
 EXIT_FAILED = 1  # an exception: bad run.json, unreadable data, a crash (the end event says which)
 EXIT_USAGE = 2  # bad command line (argparse's own code)
@@ -14,7 +17,3 @@ EXIT_ORPHANED = 4  # the watched process (--watch-pid) is gone
 EXIT_CODES = {"succeeded": EXIT_SUCCEEDED, "failed": EXIT_FAILED, "diverged": EXIT_DIVERGED,
               "cancelled": EXIT_SUCCEEDED}
 
-CHECKPOINT_DIR = "checkpoints"  # RUN_DIR/checkpoints: step_XXXXXXX.pt, best.pt, best_step_XXXXXXX.pt
-BEST_NAME = "best.pt"
-KEEP_FILE = "keep.json"  # RUN_DIR/keep.json: checkpoints the product keeps from rotation
-CANCEL_FILE = "cancel"  # RUN_DIR/cancel: the ranks stop after the step that sees it, checkpoint and exit

@@ -12,8 +12,7 @@ from typing import Any
 
 from torch.utils.tensorboard import SummaryWriter
 
-PROGRESS_FILE = "progress.jsonl"
-TENSORBOARD_DIR = "tensorboard"
+from dataset.run_layout import PROGRESS_FILE, TENSORBOARD_DIR
 
 
 def append_event(run_dir: Path, event: dict[str, Any]) -> None:

@@ -9,9 +9,9 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from dataset.run_layout import RUN_FILE
 from model.presets import Config, TrainConfig
 
-RUN_FILE = "run.json"
 # The frozen backbones a model loads from a local directory: its config's field, what the weights
 # are, and the product's setting that names the directory on each machine. A run's config names
 # none (the database's copy is shown in answers): the train worker passes its own to the engine.

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import click
 
+from dataset.run_layout import CHECKPOINT_DIR
 from webapp.cli.errors import service_errors
 from webapp.cli.state import CliState, pass_state
 
@@ -135,5 +136,5 @@ def upgrade(state: CliState, paths: tuple[Path, ...], every: bool) -> None:
 def _run_checkpoint_files(runs_dir: Path) -> list[Path]:
     """``runs/<id>/checkpoints/*.pt``, never through a linked run or checkpoint folder."""
     runs = [run for run in runs_dir.iterdir() if not run.is_symlink()] if runs_dir.is_dir() else []
-    return sorted(path for run in runs if not (run / "checkpoints").is_symlink()
-                  for path in (run / "checkpoints").glob("*.pt"))
+    return sorted(path for run in runs if not (run / CHECKPOINT_DIR).is_symlink()
+                  for path in (run / CHECKPOINT_DIR).glob("*.pt"))
