@@ -825,8 +825,9 @@ def score_frames(pairs: list[StereoSample], methods: Mapping[str, Predict], *, g
             seconds[name] += time.perf_counter() - started
             errors[name] = stats.frame_errors(prediction, sample.disparity)
         mono_errors = stats.frame_errors(align(sample), sample.disparity) if gate_keys else None
+        finite = np.isfinite(sample.disparity)
         for region in REGIONS:
-            where = sample.regions.get(region, np.zeros(sample.disparity.shape, bool)) & np.isfinite(sample.disparity)
+            where = sample.regions.get(region, np.zeros(finite.shape, bool)) & finite
             for name in methods:
                 found = stats.region_figures(errors[name], where)
                 figures[name][region]["epe"].append(found["epe"])
