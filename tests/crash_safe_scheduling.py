@@ -12,7 +12,10 @@ at 90 minutes after one worker crashed. Here a crash costs one failed test and t
 - a replacement worker starts with two files, as the first workers do, because a worker holds its
   last test until it knows the next one (PR #1328);
 - work sent to a worker that died a moment before (the controller has not heard yet) is not an
-  INTERNALERROR ending the run: it stays the dead worker's, and goes back on the queue with the rest.
+  INTERNALERROR ending the run: it stays the dead worker's, and goes back on the queue with the rest;
+- the failure says why the worker died: each worker's faulthandler writes to a file of its own, and a
+  crash report carries that file (the Python stack of every thread at a segfault), where a worker's
+  stderr would be lost in a long CI log.
 
 Remove this module once a pytest-xdist release carries those fixes.
 """
@@ -20,7 +23,11 @@ Remove this module once a pytest-xdist release carries those fixes.
 from __future__ import annotations
 
 import contextlib
-from typing import Any
+import faulthandler
+import shutil
+import tempfile
+from pathlib import Path
+from typing import IO, Any
 
 import pytest
 from xdist.scheduler import LoadFileScheduling
@@ -52,6 +59,42 @@ class CrashSafeLoadFileScheduling(LoadFileScheduling):
         if replacing:
             for node in self.nodes:
                 self._reschedule(node)
+
+
+CRASH_LOG = "crash_safe_scheduling_log"
+_crash_logs = pytest.StashKey[Path]()
+_crash_log_file = pytest.StashKey[IO[str]]()
+
+
+@pytest.hookimpl(trylast=True)  # after pytest's own faulthandler plugin, whose stderr target this replaces
+def pytest_configure(config: pytest.Config) -> None:
+    log = getattr(config, "workerinput", {}).get(CRASH_LOG)
+    if log is not None:  # a worker: its fatal errors go to the file the controller reads
+        config.stash[_crash_log_file] = stream = open(log, "w")  # noqa: SIM115 - open until the process ends
+        faulthandler.enable(stream, all_threads=True)
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    if _crash_logs in config.stash:
+        shutil.rmtree(config.stash[_crash_logs], ignore_errors=True)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_configure_node(node: WorkerController) -> None:
+    if _crash_logs not in node.config.stash:
+        node.config.stash[_crash_logs] = Path(tempfile.mkdtemp(prefix="pytest-crash-logs-"))
+    node.workerinput[CRASH_LOG] = str(node.config.stash[_crash_logs] / f"{node.gateway.id}-{id(node)}.log")
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_handlecrashitem(crashitem: str, report: pytest.TestReport, sched: Any) -> None:
+    """Add what the dead worker's faulthandler wrote (empty when it exited without a fatal error)."""
+    node = getattr(report, "node", None)
+    log = getattr(node, "workerinput", {}).get(CRASH_LOG)
+    with contextlib.suppress(OSError):
+        text = Path(log).read_text(errors="replace").strip() if log else ""
+        if text:
+            report.longrepr = f"{report.longrepr}\n{text}"
 
 
 @pytest.hookimpl(optionalhook=True)
