@@ -77,6 +77,14 @@ FRAME_TINTS = (_PICTURE_FRAME_TINT, _MIRROR_FRAME_TINT, (0.92, 0.92, 0.90), (0.0
 # find a wall that holds one whole in view (about half the mirrors are large).
 LARGE_MIRROR = 0.8
 LARGE_MIRROR_M = ((1.4, 2.4), (1.1, 1.6))  # width, height ranges
+# A mirrored front wall, edge to edge (a gym's or a dance studio's): no wall around the glass, and the side
+# walls, floor and ceiling go on in the reflection, so the room looks twice as long and nothing in the image
+# says where the glass is. Stereo is fooled over the whole wall; a mono that reads mirrors as surfaces is
+# not. Drawn first, for this share of family scenes; the picture then goes on a side wall (when neither
+# holds it, the scene has no mirrored wall).
+MIRROR_WALL = 0.5
+_FRONT_FACE = 5
+_SIDE_FACES = (0, 1)
 # Walls where stereo is weak: textureless (flat paint) or repetitive (a small tile, repeated often).
 TEXTURELESS_WALL = 0.3
 REPETITIVE_WALL = 0.2
@@ -195,6 +203,13 @@ def _sample_rect(rng: np.random.Generator, room_lo: Vec3, room_hi: Vec3, face: i
     return Rect(face, (lo0, floor_y - bottom - h), (lo0 + w, floor_y - bottom))
 
 
+def _front_wall(room_lo: Vec3, room_hi: Vec3) -> Rect:
+    """The whole front wall as one rect (tangent coordinates x, y in m): a frame grown around it lies off
+    the wall, so such a mirror has none."""
+    assert TANGENT_AXES[_FRONT_FACE // 2] == (0, 1)
+    return Rect(_FRONT_FACE, (room_lo[0], room_lo[1]), (room_hi[0], room_hi[1]))
+
+
 def _disjoint(a: Rect, b: Rect, gap: float) -> bool:
     """Whether rects ``a`` and ``b`` lie on different faces or ``gap`` metres apart."""
     if a.face != b.face:
@@ -205,10 +220,12 @@ def _disjoint(a: Rect, b: Rect, gap: float) -> bool:
 
 def _place_illusion(rng: np.random.Generator, room_lo: Vec3, room_hi: Vec3,
                     trajectory: Trajectory, width: tuple[float, float],
-                    height: tuple[float, float], avoid: Rect | None) -> Rect | None:
-    """A wall rect passing every visibility rule, or None if none was found."""
+                    height: tuple[float, float], avoid: Rect | None,
+                    faces: tuple[int, ...] = _ILLUSION_FACES) -> Rect | None:
+    """A wall rect on one of ``faces`` passing every visibility rule, or None if none was found."""
+    weights = np.array([_ILLUSION_FACE_WEIGHTS[_ILLUSION_FACES.index(f)] for f in faces])
     for _ in range(_RECT_TRIES):
-        face = int(rng.choice(_ILLUSION_FACES, p=_ILLUSION_FACE_WEIGHTS))
+        face = int(rng.choice(faces, p=weights / weights.sum()))
         rect = _sample_rect(rng, room_lo, room_hi, face, width, height)
         if rect is None:
             continue
@@ -375,11 +392,17 @@ def _try_layout(rng: np.random.Generator, family: np.random.Generator | None = N
         yaw_phase=rng.uniform(0, 2 * math.pi),
         sway_phase=rng.uniform(0, 2 * math.pi),
     )
-    picture = _place_illusion(rng, room_lo, room_hi, trajectory, (1.0, 1.8), (0.7, 1.1), None)
+    mirror_wall = family is not None and family.random() < MIRROR_WALL
+    picture = None
+    if mirror_wall:  # the picture on a side wall, if one holds it; else no mirrored wall
+        picture = _place_illusion(rng, room_lo, room_hi, trajectory, (1.0, 1.8), (0.7, 1.1), None, _SIDE_FACES)
+        mirror_wall = picture is not None
+    if picture is None:
+        picture = _place_illusion(rng, room_lo, room_hi, trajectory, (1.0, 1.8), (0.7, 1.1), None)
     if picture is None:
         return None
-    mirror = None
-    if family is not None and family.random() < LARGE_MIRROR:
+    mirror = _front_wall(room_lo, room_hi) if mirror_wall else None
+    if mirror is None and family is not None and family.random() < LARGE_MIRROR:
         mirror = _place_illusion(rng, room_lo, room_hi, trajectory, *LARGE_MIRROR_M, picture)
     if mirror is None:  # (a large one may find no wall it fits whole in view: then a usual one)
         mirror = _place_illusion(rng, room_lo, room_hi, trajectory, (0.8, 1.4), (0.8, 1.1), picture)
