@@ -161,6 +161,15 @@ def infer_architecture(state: Mapping[str, Tensor], flags: Flags = Flags()) -> d
             "iterations": flags.iterations or DEMO_ITERATIONS, "dtype": "/".join(dtypes), "given": given}
 
 
+def network_for(architecture: Mapping[str, Any]) -> SelectiveIGEV:
+    """A fresh (untrained) network of ``architecture`` as :func:`infer_architecture` reports it: with
+    ``Conversion.network.state_dict()`` saved beside the architecture, how an imported checkpoint is
+    rebuilt (``network_for(arch).load_state_dict(saved)``, then ``.eval()``)."""
+    return SelectiveIGEV(SelectiveIGEVConfig(n_gru_layers=architecture["n_gru_layers"],
+                                             corr_levels=architecture["corr_levels"],
+                                             corr_radius=architecture["corr_radius"], max_disp=architecture["max_disp"]))
+
+
 def convert(state: Mapping[str, Any], flags: Flags = Flags()) -> Conversion:
     """A Selective-IGEV state dict (as loaded; ``module.`` optional) → the network with every tensor
     from it, float32, eval mode. NotSelectiveIGEV naming what is missing, unknown or of the wrong
@@ -171,8 +180,7 @@ def convert(state: Mapping[str, Any], flags: Flags = Flags()) -> Conversion:
         raise NotSelectiveIGEV(f"not a state dict of tensors: {not_tensors[0]} is a "
                                f"{type(state[not_tensors[0]]).__name__}")
     arch = infer_architecture(state, flags)
-    network = SelectiveIGEV(SelectiveIGEVConfig(n_gru_layers=arch["n_gru_layers"], corr_levels=arch["corr_levels"],
-                                                corr_radius=arch["corr_radius"], max_disp=arch["max_disp"]))
+    network = network_for(arch)
     expected = network.state_dict()
     mapped: dict[str, Tensor] = {}
     unknown, unused, duplicates = [], [], 0

@@ -22,6 +22,7 @@ from model.selective_igev_import import (  # noqa: E402
     convert,
     infer_architecture,
     load_selective_igev,
+    network_for,
     strip_module,
     to_theirs,
 )
@@ -66,6 +67,8 @@ def test_published_file_predicts_what_selective_igev_does(fixture: dict, state: 
     assert conversion.architecture == {"n_gru_layers": 3, "corr_levels": 2, "corr_radius": 4, "max_disp": 192,
                                        "iterations": 32, "dtype": "float32", "given": ["max_disp"]}
     assert not conversion.network.training
+    rebuilt = network_for(conversion.architecture)  # as a saved import is rebuilt: architecture + state dict
+    rebuilt.load_state_dict(conversion.network.state_dict(), strict=True)
     ours = predict_disparity(conversion.network, fixture["left"], fixture["right"])
     assert ours.dtype == np.float32 and ours.shape == (height, width)
     reference = fixture["disparity"]
