@@ -1,0 +1,231 @@
+"""Selective-IGEV's published checkpoints (Windsrain/Selective-Stereo, MIT: ``sceneflow.pth``, its KITTI,
+ETH3D and Middlebury fine-tunes) as a loaded :class:`~model.stereo.selective_igev.SelectiveIGEV`: a
+DataParallel state dict (keys under ``module.``), read weights-only, the architecture inferred from the
+tensors where they settle it, every key placed.
+
+What the tensors fix: the GRU levels (``update_block.gru16``/``gru08`` present or not), the GRU width (128,
+the only one the channel attention allows) and the correlation planes the motion encoder reads
+(levels × 9 × (2·radius + 1)). What they do not: ``max_disp`` (the cost volume's span; no tensor depends
+on it, and the published files differ — 192 by default, 768 for the Middlebury fine-tune as the README
+runs it), so it must be given; the split of the planes into levels and radius, taken as the published
+2 × radius 4 when the count is theirs (162) and otherwise to be given. A file that needs a flag is refused,
+naming it, never imported on a guess. Iterations: the demo's 32 unless given (the README runs the
+Middlebury file with 80).
+
+Tensors with no place of their own: the context encoder's residual blocks hold their shortcut norm twice
+(``norm3`` and ``downsample.1``, one module); the training-only upsampling of the initial disparity
+(``spx``, ``spx_2``, ``spx_4``) and, with fewer than 3 GRU levels, the context encoder's coarser stages
+exist but never run in test mode. A half-precision file is upcast to float32 (the demo runs float32).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import Tensor
+
+from model.stereo.selective_igev import DEMO_ITERATIONS, GROUPS, HIDDEN, SelectiveIGEV, SelectiveIGEVConfig
+
+SOURCE = "selective-igev"
+CORR_LEVELS, CORR_RADIUS = 2, 4  # every published file's: 2 × 9 × 9 = 162 planes
+_PUBLISHED_PLANES = CORR_LEVELS * (GROUPS + 1) * (2 * CORR_RADIUS + 1)
+_MAX_DISP_HINT = "--max-disp 192 (the reference's default: its SceneFlow, KITTI and ETH3D files) or 768 (its " \
+                 "middlebury_finetune file, as its README runs it)"
+_DUPLICATE = re.compile(r"\.norm3\.")
+_TRAINING_ONLY = ("spx.", "spx_2.", "spx_4.")
+
+
+class NotSelectiveIGEV(ValueError):
+    """A file that is not a Selective-IGEV checkpoint, or whose architecture needs flags (the message
+    says what is missing, unknown, or which flags to give)."""
+
+
+@dataclass(frozen=True)
+class Flags:
+    """What an importer says where the tensors do not: the reference's argparse options ``--max_disp``,
+    ``--corr_levels``, ``--corr_radius``, ``--valid_iters``. None: not given."""
+
+    max_disp: int | None = None
+    corr_levels: int | None = None
+    corr_radius: int | None = None
+    iterations: int | None = None
+
+
+@dataclass(frozen=True)
+class Conversion:
+    network: SelectiveIGEV  # every tensor from the file, float32, eval mode, on the CPU
+    architecture: dict[str, Any]  # n_gru_layers, corr_levels, corr_radius, max_disp, iterations, dtype, given
+    keys_loaded: int  # the network's tensors, each from the file
+    tensors_in_file: int
+    duplicates: int  # norm3 tensors, the same module as their block's downsample.1
+    unused: list[str] = field(default_factory=list)  # the file's keys that test mode never reads
+
+
+def _prefixes() -> list[tuple[str, str]]:
+    """(the reference's key prefix, ours) where our module is the project's own, longest first."""
+    pairs = [("cnet.conv1.", "cnet.trunk.stem.0."), ("cnet.norm1.", "cnet.trunk.stem.1.")]
+    pairs += [(f"cnet.layer{stage}.{block}.", f"cnet.trunk.layers.{2 * (stage - 1) + block}.")
+              for stage in (1, 2, 3) for block in (0, 1)]
+    pairs += [("cnet.layer4.", "cnet.down.0."), ("cnet.layer5.", "cnet.down.1.")]
+    for level, resolution in enumerate(("04", "08", "16")):
+        pairs += [(f"cnet.outputs{resolution}.{head}.", f"cnet.{('hidden', 'context')[head]}.{level}.")
+                  for head in (0, 1)]
+    pairs += [(f"update_block.encoder.{theirs}.", f"update_block.encoder.{ours}.") for theirs, ours in
+              (("convc1", "corr.0"), ("convc2", "corr.2"), ("convd1", "disp.0"), ("convd2", "disp.2"), ("conv", "out"))]
+    return sorted(pairs, key=lambda pair: -len(pair[0]))
+
+
+_PREFIXES = _prefixes()
+
+
+def to_ours(key: str) -> str:
+    """The reference's key (``module.`` stripped) → this network's."""
+    for theirs, ours in _PREFIXES:
+        if key.startswith(theirs):
+            key = ours + key[len(theirs):]
+            break
+    return key.replace(".downsample.", ".skip.") if key.startswith("cnet.") else key
+
+
+def to_theirs(key: str) -> str:
+    """This network's key → the reference's (for messages)."""
+    for theirs, ours in _PREFIXES:
+        if key.startswith(ours):
+            key = theirs + key[len(ours):]
+            break
+    return key.replace(".skip.", ".downsample.") if key.startswith("cnet.") else key
+
+
+def _never_run(key: str, levels: int) -> bool:
+    """A reference key that test mode never reads at ``levels`` GRU levels."""
+    if key.startswith(_TRAINING_ONLY):
+        return True
+    coarse = [("cnet.layer5.", "cnet.outputs16.")] if levels < 3 else []
+    coarse += [("cnet.layer4.", "cnet.outputs08.")] if levels < 2 else []
+    return any(key.startswith(prefix) for pair in coarse for prefix in pair)
+
+
+def strip_module(state: Mapping[str, Any]) -> dict[str, Any]:
+    """Keys without DataParallel's ``module.`` (every published file has it)."""
+    return {key.removeprefix("module."): value for key, value in state.items()}
+
+
+def infer_architecture(state: Mapping[str, Tensor], flags: Flags = Flags()) -> dict[str, Any]:
+    """The network's options for a Selective-IGEV state dict (``module.`` stripped): ``{"n_gru_layers",
+    "corr_levels", "corr_radius", "max_disp", "iterations", "dtype", "given"}``. NotSelectiveIGEV naming
+    what is missing or contradicts the tensors, or the flags to give (module doc)."""
+    required = ["feature.conv_stem.weight", "update_block.encoder.convc1.weight", "update_block.gru04.small_gru.convz.weight",
+                "cam.fc.0.weight", "sam.samconv.weight", "cost_agg.conv1_up.conv.weight", "cnet.conv1.weight"]
+    missing = [key for key in required if key not in state]
+    if missing:
+        raise NotSelectiveIGEV(f"not a Selective-IGEV checkpoint: no {', '.join(missing)} "
+                               f"(it has {len(state)} tensors{', e.g. ' + next(iter(state)) if state else ''})")
+    levels = 1 + ("update_block.gru08.small_gru.convz.weight" in state) + ("update_block.gru16.small_gru.convz.weight" in state)
+    if levels == 2 and "update_block.gru08.small_gru.convz.weight" not in state:
+        raise NotSelectiveIGEV("update_block.gru16 without gru08: not a layout Selective-IGEV builds")
+    hidden = state["update_block.gru04.small_gru.convz.weight"].shape[0]
+    if hidden != HIDDEN:
+        raise NotSelectiveIGEV(f"GRU width {hidden}: Selective-IGEV's channel attention is built for {HIDDEN}")
+    planes = state["update_block.encoder.convc1.weight"].shape[1]
+    per_level = GROUPS + 1
+    given_corr = flags.corr_levels is not None and flags.corr_radius is not None
+    if given_corr:
+        corr = (int(flags.corr_levels), int(flags.corr_radius))  # type: ignore[arg-type]
+        if corr[0] * per_level * (2 * corr[1] + 1) != planes:
+            raise NotSelectiveIGEV(f"--corr-levels {corr[0]} × 9 × (2·--corr-radius {corr[1]} + 1) is not the "
+                                   f"{planes} planes the file's motion encoder reads")
+    elif flags.corr_levels is not None or flags.corr_radius is not None:
+        raise NotSelectiveIGEV("give --corr-levels and --corr-radius together")
+    else:
+        corr = (CORR_LEVELS, CORR_RADIUS) if planes == _PUBLISHED_PLANES else None
+    needed = [] if flags.max_disp is not None else [_MAX_DISP_HINT + " (no tensor holds the cost volume's span)"]
+    if corr is None:
+        needed.append(f"--corr-levels and --corr-radius (levels × 9 × (2·radius + 1) = its {planes} planes; "
+                      f"the published files' are 2 and 4)")
+    if needed:
+        raise NotSelectiveIGEV("the tensors do not settle Selective-IGEV's architecture: give " + "; ".join(needed))
+    assert flags.max_disp is not None and corr is not None
+    if flags.max_disp <= 0 or flags.max_disp % 32:
+        raise NotSelectiveIGEV(f"--max-disp {flags.max_disp}: must be a positive multiple of 32 (the cost volume at "
+                               f"1/4 is halved three times)")
+    if flags.iterations is not None and flags.iterations < 1:
+        raise NotSelectiveIGEV(f"--iterations {flags.iterations}: must be at least 1")
+    dtypes = sorted({str(t.dtype).removeprefix("torch.") for t in state.values() if t.is_floating_point()})
+    given = sorted(name for name, value in vars(flags).items() if value is not None)
+    return {"n_gru_layers": levels, "corr_levels": corr[0], "corr_radius": corr[1], "max_disp": flags.max_disp,
+            "iterations": flags.iterations or DEMO_ITERATIONS, "dtype": "/".join(dtypes), "given": given}
+
+
+def network_for(architecture: Mapping[str, Any]) -> SelectiveIGEV:
+    """A fresh (untrained) network of ``architecture`` as :func:`infer_architecture` reports it: with
+    ``Conversion.network.state_dict()`` saved beside the architecture, how an imported checkpoint is
+    rebuilt (``network_for(arch).load_state_dict(saved)``, then ``.eval()``)."""
+    return SelectiveIGEV(SelectiveIGEVConfig(n_gru_layers=architecture["n_gru_layers"],
+                                             corr_levels=architecture["corr_levels"],
+                                             corr_radius=architecture["corr_radius"], max_disp=architecture["max_disp"]))
+
+
+def convert(state: Mapping[str, Any], flags: Flags = Flags()) -> Conversion:
+    """A Selective-IGEV state dict (as loaded; ``module.`` optional) → the network with every tensor
+    from it, float32, eval mode. NotSelectiveIGEV naming what is missing, unknown or of the wrong
+    shape, or the flags to give (:func:`infer_architecture`)."""
+    state = strip_module(state)
+    not_tensors = [key for key, value in state.items() if not isinstance(value, torch.Tensor)]
+    if not_tensors:
+        raise NotSelectiveIGEV(f"not a state dict of tensors: {not_tensors[0]} is a "
+                               f"{type(state[not_tensors[0]]).__name__}")
+    arch = infer_architecture(state, flags)
+    network = network_for(arch)
+    expected = network.state_dict()
+    mapped: dict[str, Tensor] = {}
+    unknown, unused, duplicates = [], [], 0
+    for key, tensor in state.items():
+        if _DUPLICATE.search(key) and _DUPLICATE.sub(".downsample.1.", key) in state:
+            if not torch.equal(tensor, state[_DUPLICATE.sub(".downsample.1.", key)]):
+                raise NotSelectiveIGEV(f"{key} differs from its block's downsample.1 (one module in the reference)")
+            duplicates += 1
+            continue
+        target = to_ours(key)
+        if target in expected:
+            mapped[target] = tensor
+        elif _never_run(key, arch["n_gru_layers"]):
+            unused.append(key)
+        else:
+            unknown.append(key)
+    missing = [to_theirs(key) for key in expected if key not in mapped]
+    if unknown or missing:
+        parts = ([f"unknown {_few(unknown)}"] if unknown else []) + ([f"missing {_few(missing)}"] if missing else [])
+        raise NotSelectiveIGEV(f"not the Selective-IGEV layout its tensors suggest: {'; '.join(parts)}")
+    for key, tensor in mapped.items():
+        if tuple(tensor.shape) != tuple(expected[key].shape):
+            raise NotSelectiveIGEV(f"{to_theirs(key)} has shape {tuple(tensor.shape)}, "
+                                   f"expected {tuple(expected[key].shape)}")
+        if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all()):
+            raise NotSelectiveIGEV(f"{to_theirs(key)} holds values that are not finite")
+    network.load_state_dict(mapped, strict=True)  # copies into float32 parameters: a half file is upcast
+    return Conversion(network.eval(), arch, len(mapped), len(state), duplicates, unused)
+
+
+def _few(keys: list[str]) -> str:
+    shown = ", ".join(keys[:3])
+    return shown + (f" and {len(keys) - 3} more" if len(keys) > 3 else "")
+
+
+def read_published(path: Path) -> dict[str, Any]:
+    """A published file's state dict, loaded weights-only (a pickle naming code is refused)."""
+    from model.checkpoint import read_weights_only
+
+    state = read_weights_only(Path(path), Path(path).name)
+    if not isinstance(state, Mapping):
+        raise NotSelectiveIGEV(f"{Path(path).name} holds a {type(state).__name__}, not a state dict")
+    return dict(state)
+
+
+def load_selective_igev(path: Path, flags: Flags = Flags()) -> Conversion:
+    """The published file at ``path`` as a loaded network in eval mode (:func:`convert`)."""
+    return convert(read_published(path), flags)

@@ -1,0 +1,78 @@
+"""Weights in the layout of Selective-IGEV's published checkpoints, regenerated from a seed.
+
+The golden fixture (tests/fixtures/selective_igev/) stores a key/shape list and a seed rather than the
+network's 12 M weights; :func:`igev_state` turns them back into the state dict the fixture's reference
+output was computed with. Scales keep 32 refinements finite and the disparity inside the cost
+volume (the fixture's output spans 87–160 px): convolutions kaiming-like (std √(1/fan-in)), small biases, and
+batch norms far from the identity — affine scales 0.5–1.5, shifts ±0.3, running means ±0.5 and
+variances 0.3–3 — so that a norm run in training mode (batch statistics) gives another output. The
+context encoder's ``norm3`` is the same module as its block's ``downsample.1``: the two share values.
+
+Only torch is needed: the project holds none of Selective-IGEV's code.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+FIXTURES = Path(__file__).parent / "fixtures" / "selective_igev"
+
+
+def _canonical(name: str) -> str:
+    return name.replace(".norm3.", ".downsample.1.")
+
+
+def igev_state(keys: Sequence[tuple[str, Sequence[int]]], seed: int) -> dict[str, torch.Tensor]:
+    """The state dict for ``keys`` ((name, shape) in file order) and ``seed``."""
+    generator = torch.Generator().manual_seed(seed)
+    values: dict[str, torch.Tensor] = {}
+
+    def uniform(shape: Sequence[int], low: float, high: float) -> torch.Tensor:
+        return low + (high - low) * torch.rand(tuple(shape), generator=generator)
+
+    state = {}
+    for name, shape in keys:
+        canonical = _canonical(name)
+        if canonical not in values:
+            leaf = canonical.rsplit(".", 1)[-1]
+            if leaf == "num_batches_tracked":
+                value = torch.tensor(0, dtype=torch.int64)
+            elif leaf == "running_mean":
+                value = uniform(shape, -0.5, 0.5)
+            elif leaf == "running_var":
+                value = torch.exp(uniform(shape, -1.2, 1.1))  # 0.3 … 3
+            elif len(shape) >= 3:  # a convolution's weights
+                fan_in = int(np.prod(shape[1:]))
+                if ".conv_dw." in canonical:  # depthwise: one input channel per output
+                    fan_in = int(np.prod(shape[2:]))
+                value = (1.0 / fan_in) ** 0.5 * torch.randn(tuple(shape), generator=generator)
+            elif leaf == "weight":  # a norm's affine scale
+                value = uniform(shape, 0.5, 1.5)
+            elif ".bn" in canonical or ".norm" in canonical or "downsample.1." in canonical:
+                value = uniform(shape, -0.3, 0.3)  # a norm's shift
+            else:
+                value = 0.02 * torch.randn(tuple(shape), generator=generator)
+            values[canonical] = value
+        state[name] = values[canonical].clone()
+    return state
+
+
+def load_fixture(name: str) -> dict[str, Any]:
+    """The fixture ``name``: its JSON (flags, seed, keys, iterations, crop) with the npz arrays (``left``,
+    ``right`` uint8 H×W×3, ``disparity`` float32 H×W, the reference's output) added."""
+    with open(FIXTURES / f"{name}.json", encoding="utf-8") as handle:
+        fixture = json.load(handle)
+    with np.load(FIXTURES / f"{name}.npz") as arrays:
+        fixture.update({key: arrays[key] for key in arrays.files})
+    return fixture
+
+
+def fixture_state(fixture: dict[str, Any]) -> dict[str, torch.Tensor]:
+    """The fixture's weights, keys as in a published file (``module.`` prefixed)."""
+    return igev_state([(key, shape) for key, shape in fixture["keys"]], fixture["seed"])
