@@ -23,7 +23,7 @@ from __future__ import annotations
 import hashlib
 import re
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -61,6 +61,9 @@ class Flags:
     corr_levels: int | None = None
     corr_radius: int | None = None
     iterations: int | None = None
+
+
+FLAGS = tuple(field.name for field in fields(Flags))  # a RAFT-Stereo file may need any of them
 
 
 def encoder_prefixes() -> list[tuple[str, str]]:
