@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -23,11 +23,20 @@ from dataset.readers import SampleError, StereoSample
 from dataset.readers.base import resize_disparity, resize_image
 from model.align import AlignRule, align
 
-# A baseline network's method → the model.architecture its checkpoint must have (and the example a
-# message names): each scores its own checkpoint's disparity.
-BASELINE_METHODS: dict[str, tuple[str, str]] = {
-    "raft_stereo": ("raft-stereo", "imported:raftstereo-sceneflow"),
-    "selective_raft": ("selective-raft", "imported:selective-raft-sceneflow")}
+
+class Baseline(NamedTuple):
+    """A baseline network's method: the model.architecture its checkpoint must have, the network's
+    name, and the checkpoint a message gives as an example."""
+
+    architecture: str
+    title: str
+    example: str
+
+
+# Each scores its own checkpoint's disparity.
+BASELINE_METHODS: dict[str, Baseline] = {
+    "raft_stereo": Baseline("raft-stereo", "RAFT-Stereo", "imported:raftstereo-sceneflow"),
+    "selective_raft": Baseline("selective-raft", "Selective-RAFT", "imported:sceneflow")}
 METHODS = ("fusion", "stereo", "mono_align", *BASELINE_METHODS, "mono_gt_align", "sgbm", "predictions")
 NETWORK_METHODS = ("fusion", "stereo", "mono_align", *BASELINE_METHODS)
 FUSION_METHODS = ("fusion", "stereo", "mono_align")  # read from one fusion checkpoint's forward pass
@@ -166,11 +175,11 @@ def build_methods(names: list[str], *, checkpoint: Path | None, predictions: Pat
         if path not in networks:  # methods naming one checkpoint share its forward pass
             networks[path] = NetworkRuns(path, device, mono, iters, label=(labels or {}).get(str(path)))
         architecture = networks[path].config.model.architecture
-        if name in BASELINE_METHODS and architecture != BASELINE_METHODS[name][0]:
-            wanted = BASELINE_METHODS[name][0]
-            raise ValueError(f"{wanted} scores a {wanted} network's checkpoint (an imported one"
-                             f"{', or a raft-stereo run' if wanted == 'raft-stereo' else ''}), not a {architecture} "
-                             "network's")
+        baseline = BASELINE_METHODS.get(name)
+        if baseline is not None and architecture != baseline.architecture:
+            trained = ", or a raft-stereo run's" if baseline.architecture == "raft-stereo" else ""
+            raise ValueError(f"{baseline.architecture} scores a {baseline.title} network's checkpoint (an imported "
+                             f"one{trained}), not a {architecture} network's")
         return networks[path]
 
     for name in names:

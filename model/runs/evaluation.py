@@ -59,9 +59,9 @@ def evaluation_params(request: EvaluationLaunch, settings: Any, session: Session
     the checkpoint's run) — samples its training never read.
     """
     shell = shell or EvalShellOptions()
-    for method, (_, example) in BASELINE_METHODS.items():
+    for method, baseline in BASELINE_METHODS.items():
         if method in request.methods and method not in request.checkpoints | shell.checkpoints:
-            raise FieldError("checkpoints", f"{method.replace('_', '-')} needs its own checkpoint, e.g. {example}")
+            raise FieldError("checkpoints", f"{baseline.architecture} needs its own checkpoint, e.g. {baseline.example}")
     source = _checkpoint_source(request, settings, session, shell)
     own = {m: _method_source(request, m, settings, session, shell) for m in request.methods
            if m in request.checkpoints or m in shell.checkpoints}
