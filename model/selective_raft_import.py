@@ -33,9 +33,9 @@ from model.raft_import import (
 from model.raft_import import to_theirs as _mapped_back
 
 SOURCE = "selective-raft"
-# The layout of the published files (its README trains every one with train_stereo.py's defaults):
-# (n_downsample, GRU levels, hidden, correlation planes) → what the name says.
-PUBLISHED = {(2, 3, 128, 36): "sceneflow, kitti, eth3d and middlebury files (train_stereo.py's defaults)"}
+# The layout of the published files (train_stereo.py's and demo_imgs.py's defaults, which its README's
+# fine-tuning commands keep): (n_downsample, GRU levels, hidden, correlation planes) → a description.
+PUBLISHED = {(2, 3, 128, 36): "the published layout: train_stereo.py's and demo_imgs.py's defaults"}
 CORR_LEVELS, CORR_RADIUS = 4, 4  # demo_imgs.py's defaults: the published files' 36 planes
 DEMO_ITERATIONS = 32  # demo_imgs.py's --valid_iters
 FLAGS = ("corr_levels", "corr_radius", "iterations")  # the Flags fields a Selective-RAFT file may need

@@ -235,7 +235,8 @@ def test_the_cli_refuses_in_one_line_and_a_half_precision_file_imports(home: Pat
     half = tmp_path / "half.pth"
     torch.save({k: v.half() if v.is_floating_point() else v for k, v in state.items()}, half)
     result = _cli(home, "checkpoints", "import", "--from", "selective-raft", str(half))
-    assert result.exit_code == 0 and result.output.startswith("imported:half: Selective-RAFT (sceneflow"), result.output
+    assert result.exit_code == 0, result.output
+    assert result.output.startswith("imported:half: Selective-RAFT (the published layout"), result.output
     weights = load_checkpoint(home / "checkpoints" / "imported" / "half.pt")["state"]
     mask = next(v for k, v in weights.items() if k.endswith("update.mask.net.2.weight"))
     assert mask.dtype == torch.float32
