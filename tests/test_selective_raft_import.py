@@ -277,3 +277,34 @@ def test_evaluate_scores_selective_raft_beside_the_others_in_one_report(tmp_path
     alone = _cli(home, "evaluate", "--data", str(tmp_path / "kitti"), "--format", "kitti", "--method",
                  "selective-raft", "--checkpoint", selective, "--here")
     assert alone.exit_code != 0 and "selective-raft needs its own checkpoint" in alone.output
+
+
+def test_the_preset_is_import_only_and_the_network_trains_with_frozen_batch_norm() -> None:
+    from model.losses import fusion_loss
+    from model.network import FusionNetwork
+    from model.presets import ALL_PRESETS, load_preset
+    from tests.model_pairs import random_dot_pair
+
+    preset = load_preset("selective-raft")
+    assert "selective-raft" not in ALL_PRESETS  # no `train --preset selective-raft`: only imports fill it
+    assert (preset.model.architecture, preset.train.test_iters, preset.train.amp) == ("selective-raft", 32, False)
+    assert preset.model.size_multiple == 16 and preset.model.inference_padding == (32, True)  # the demo's
+    with pytest.raises(ValueError, match="'selective-raft' is stereo only"):
+        load_preset("selective-raft", {"use_mono": True})
+    tiny = {"encoder_dims": [8, 8, 16], "encoder_blocks": [1, 1, 1], "stem_kernel": 3, "feature_dim": 16,
+            "hidden_dims": [16, 16, 16]}
+    with pytest.raises(ValueError, match="needs 2 or 3 GRU levels"):
+        FusionNetwork(load_preset("selective-raft", {**tiny, "gru_levels": 1}).model)
+    config = load_preset("selective-raft", tiny)
+    torch.manual_seed(0)
+    network = FusionNetwork(config.model).train()
+    left, right, gt = (torch.from_numpy(a) for a in random_dot_pair(32, 64, 3))
+    left, right = (t.permute(2, 0, 1)[None].float() for t in (left, right))
+    norms = [m for m in network.modules() if isinstance(m, torch.nn.BatchNorm2d)]
+    before = [m.running_mean.clone() for m in norms]
+    out = network(left, right, iters=3)
+    assert out.stereo_only and len(out.stereo_iterates) == 3 and out.disparity.shape == (1, 1, 32, 64)
+    assert norms and all(torch.equal(m.running_mean, b) for m, b in zip(norms, before, strict=True))
+    loss, _ = fusion_loss(out, gt[None, None], torch.ones(1, 1, 32, 64, dtype=torch.bool), config.train)
+    loss.backward()
+    assert all(p.grad is not None for p in network.parameters())  # every module of the network takes part
