@@ -13,6 +13,10 @@ show one of those layouts, and otherwise from the importer's flags (:class:`Flag
 layout is refused, naming the flags to give, never imported on a guess. Convex upsampling pads with
 zeros, as RAFT-Stereo does.
 
+The encoders' key map (:func:`encoder_prefixes`), the loader (:func:`load_mapped`) and the writer
+(:func:`import_file`) serve the networks built on RAFT-Stereo's encoders too
+(model/selective_raft_import.py).
+
 Two kinds of the file's tensors have no place of their own: RAFT-Stereo's residual blocks hold their
 shortcut's norm twice (``norm3`` and ``downsample.1``, one module), and with fewer than 3 GRU levels
 its coarsest GRU and context stage exist but never run (``gru32``, ``layer5``, ``outputs32``).
