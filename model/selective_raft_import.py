@@ -12,7 +12,7 @@ the only norm its code builds) and the correlation planes (levels × (2·radius 
 fix — how the planes split into levels and radius — is the demo's default (4 × 4) for the published
 layout (:data:`PUBLISHED`) and otherwise comes from ``--corr-levels``/``--corr-radius``: a file of
 another layout is refused, naming them, never imported on a guess. Its iterations are the demo's 32
-unless ``--iters`` is given. Its forward never reads a ``slow_fast_gru`` or a context norm option, so
+unless ``--iters`` is given. Its code fixes the context norm and never reads ``slow_fast_gru``, so
 those flags are refused.
 """
 
@@ -67,7 +67,7 @@ def infer_architecture(state: Mapping[str, Any], flags: Flags = Flags()) -> dict
     refused = [f"--{name.replace('_', '-')}" for name, value in vars(flags).items()
                if value is not None and name not in FLAGS]
     if refused:
-        raise NotSelectiveRaft(f"{', '.join(refused)}: not an option of Selective-RAFT (its forward never reads it)")
+        raise NotSelectiveRaft(f"{', '.join(refused)}: not an option of Selective-RAFT (its code fixes it or never reads it)")
     required = ["update_block.mask.2.weight", "update_block.gru04.small_gru.convz.weight", "sam.samconv.weight",
                 "cam.fc.0.weight", "cnet.conv1.weight", "fnet.conv2.weight", "update_block.encoder.convc1.weight"]
     missing = [key for key in required if key not in state]

@@ -257,7 +257,7 @@ def import_checkpoint(settings: Any, file: Path, *, source: str, name: str | Non
         refused = [FLAG_OPTIONS[field] for field, value in vars(flags).items()
                    if value is not None and field not in importer.FLAGS]
         if refused:
-            raise InvalidInput(f"{', '.join(refused)}: not an option of {source} files (its network never reads it)")
+            raise InvalidInput(f"{', '.join(refused)}: not an option of {source} files (its code fixes it or never reads it)")
     name = name or re.sub(r"[^A-Za-z0-9._-]", "-", Path(file).stem).lstrip("._-")[:64] or source
     stereo, depth = imported_path(Path(settings.home), name), imported_model_dir(Path(settings.home), name)
     # One namespace for both kinds: imported:NAME must name one thing.
