@@ -1,7 +1,8 @@
 """The fusion model's budget: the ``lite`` preset on one 1920×1080 pair, timed in a
 process of its own (peak resident memory: that child's own VmHWM), beside OpenCV SGBM
-on the same pair in the same run and RAFT-Stereo's own network (the ``raft-stereo`` preset at its
-published sizes and 32 test iterations, what an imported checkpoint runs); parameters per module;
+on the same pair in the same run and the baselines' own networks (RAFT-Stereo's ``raft-stereo`` and
+Selective-RAFT's ``selective-raft`` presets at their published sizes and 32 test iterations, what an
+imported checkpoint runs: :data:`BASELINES`); parameters per module;
 training steps/s at the lite crop. The lite VLM's EfficientNet-Lite0 eye (``vlm_eye``, lite's
 default): lite on the same pair with its VLM's patches instead, the eye's own stride-16 features at
 the size lite's VLM sees, and its parameters.
@@ -35,6 +36,8 @@ BUDGET_S, BUDGET_MB = 3.0, 3072.0
 EYE = {"vlm_eye": "efficientnet-lite0", "vlm_eye_weights": "random"}
 # lite's VLM before it had an eye: image tokens from patches it learns itself
 PATCHES = {"vlm_eye": "patches"}
+# The baselines timed beside lite, by their keys in the JSON: the preset each runs.
+BASELINES = {"raft_stereo": "raft-stereo", "selective_raft": "selective-raft"}
 
 
 def _pair(width: int, height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -174,16 +177,18 @@ def training_steps_per_s(steps: int) -> float:
     return steps / (time.perf_counter() - started)
 
 
-def run_model_bench(repeats: int = 2, train_steps: int = 3, raft_stereo: bool = True) -> dict[str, Any]:
-    """The JSON of ``illusion-studio bench model``; ``raft_stereo``: also time RAFT-Stereo's network
-    (once: minutes on a 2-core CPU)."""
+def run_model_bench(repeats: int = 2, train_steps: int = 3, raft_stereo: bool = True,
+                    selective_raft: bool = True) -> dict[str, Any]:
+    """The JSON of ``illusion-studio bench model``; ``raft_stereo``, ``selective_raft``: also time that
+    baseline's network (once each: minutes on a 2-core CPU)."""
     left, right, mono = _pair(1920, 1080)
+    wanted = {"raft_stereo": raft_stereo, "selective_raft": selective_raft}
     with tempfile.TemporaryDirectory() as tmp:
         pair_file = Path(tmp) / "pair.npz"
         np.savez(pair_file, left=left, right=right, mono=mono)
         child = _timed(pair_file, repeats, "lite")  # as shipped: the eye, its package's weights
         patches = _timed(pair_file, repeats, "lite", PATCHES)
-        raft = _timed(pair_file, 1, "raft-stereo") if raft_stereo else None
+        baselines = {key: _timed(pair_file, 1, preset) for key, preset in BASELINES.items() if wanted[key]}
     with open("/proc/loadavg") as handle:
         load = float(handle.read().split()[0])
     return {
@@ -195,8 +200,9 @@ def run_model_bench(repeats: int = 2, train_steps: int = 3, raft_stereo: bool = 
         "eye_input": child["eye_input"],
         "eye_parameters": eye_parameters(),
         "sgbm_1080p_s": round(sgbm_seconds(left, right, repeats), 3),
-        **({"raft_stereo_1080p_s": round(raft["seconds"], 3), "raft_stereo_1080p_peak_mb": round(raft["peak_mb"], 1),
-            "raft_stereo_iters": raft["iters"]} if raft is not None else {}),
+        **{field: value for key, timed in baselines.items() for field, value in (
+            (f"{key}_1080p_s", round(timed["seconds"], 3)), (f"{key}_1080p_peak_mb", round(timed["peak_mb"], 1)),
+            (f"{key}_iters", timed["iters"]))},
         "lite_budget_s": BUDGET_S,
         "lite_budget_mb": BUDGET_MB,
         "lite_within_budget": child["seconds"] <= BUDGET_S and child["peak_mb"] <= BUDGET_MB,

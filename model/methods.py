@@ -1,10 +1,11 @@
 """The methods an evaluation compares, each a disparity predictor over :class:`StereoSample`s.
 
 ``fusion``, ``stereo`` and ``mono_align`` share one forward pass of a fusion checkpoint per
-sample; ``raft_stereo`` is a stereo-only network's disparity (RAFT-Stereo's, e.g. an imported
-published checkpoint); each network method may have a checkpoint of its own, and methods that share
-one share its forward pass. ``mono_gt_align`` and ``sgbm`` need no network (torch loads only when a
-network method is asked for); ``predictions`` reads another program's PFMs.
+sample; ``raft_stereo`` and ``selective_raft`` are stereo-only networks' disparities (RAFT-Stereo's,
+Selective-RAFT's, e.g. imported published checkpoints: :data:`BASELINE_METHODS`); each network method
+may have a checkpoint of its own, and methods that share one share its forward pass. ``mono_gt_align``
+and ``sgbm`` need no network (torch loads only when a network method is asked for); ``predictions``
+reads another program's PFMs.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -22,8 +23,22 @@ from dataset.readers import SampleError, StereoSample
 from dataset.readers.base import resize_disparity, resize_image
 from model.align import AlignRule, align
 
-METHODS = ("fusion", "stereo", "mono_align", "raft_stereo", "mono_gt_align", "sgbm", "predictions")
-NETWORK_METHODS = ("fusion", "stereo", "mono_align", "raft_stereo")
+
+class Baseline(NamedTuple):
+    """A baseline network's method: the model.architecture its checkpoint must have, the network's
+    name, and the checkpoint a message gives as an example."""
+
+    architecture: str
+    title: str
+    example: str
+
+
+# Each scores its own checkpoint's disparity.
+BASELINE_METHODS: dict[str, Baseline] = {
+    "raft_stereo": Baseline("raft-stereo", "RAFT-Stereo", "imported:raftstereo-sceneflow"),
+    "selective_raft": Baseline("selective-raft", "Selective-RAFT", "imported:sceneflow")}
+METHODS = ("fusion", "stereo", "mono_align", *BASELINE_METHODS, "mono_gt_align", "sgbm", "predictions")
+NETWORK_METHODS = ("fusion", "stereo", "mono_align", *BASELINE_METHODS)
 FUSION_METHODS = ("fusion", "stereo", "mono_align")  # read from one fusion checkpoint's forward pass
 
 
@@ -159,9 +174,12 @@ def build_methods(names: list[str], *, checkpoint: Path | None, predictions: Pat
             raise ValueError(f"{name.replace('_', '-')} needs a checkpoint (--checkpoint, or promote a run)")
         if path not in networks:  # methods naming one checkpoint share its forward pass
             networks[path] = NetworkRuns(path, device, mono, iters, label=(labels or {}).get(str(path)))
-        if name == "raft_stereo" and networks[path].config.model.architecture != "raft-stereo":
-            raise ValueError("raft-stereo scores a RAFT-Stereo network's checkpoint (an imported one, or a "
-                             "raft-stereo run's), not a fusion network's")
+        architecture = networks[path].config.model.architecture
+        baseline = BASELINE_METHODS.get(name)
+        if baseline is not None and architecture != baseline.architecture:
+            trained = ", or a raft-stereo run's" if baseline.architecture == "raft-stereo" else ""
+            raise ValueError(f"{baseline.architecture} scores a {baseline.title} network's checkpoint (an imported "
+                             f"one{trained}), not a {architecture} network's")
         return networks[path]
 
     for name in names:
@@ -171,7 +189,7 @@ def build_methods(names: list[str], *, checkpoint: Path | None, predictions: Pat
             methods[name] = lambda s, r=network(name): r(s).stereo
         elif name == "mono_align":
             methods[name] = lambda s, r=network(name): r(s).mono_align
-        elif name == "raft_stereo":
+        elif name in BASELINE_METHODS:
             methods[name] = lambda s, r=network(name): r(s).disparity
         elif name == "mono_gt_align":
             methods[name] = lambda s: _gt_aligned(s, mono(s), align_rule)

@@ -1,8 +1,9 @@
 """The VLM-driven monocular–stereo fusion network (paper section 4), wiring the branches as
 RAFT-Stereo's ``raft_stereo.py`` does: mono branch → context → stereo GRU iterations → VLM
-embeddings → flow confidence → global fusion. With ``model.architecture = "raft-stereo"`` the same
-class is RAFT-Stereo's own stereo-only network (model/stereo/raft_stereo.py), so training,
-checkpoints, prediction and evaluation treat both alike."""
+embeddings → flow confidence → global fusion. With ``model.architecture = "raft-stereo"`` (or
+another of :data:`BASELINE_BRANCHES`) the same class is that paper's own stereo-only network
+(model/stereo/raft_stereo.py, model/stereo/selective_raft.py), so training, checkpoints, prediction
+and evaluation treat them alike."""
 
 from __future__ import annotations
 
@@ -19,11 +20,15 @@ from model.mono import make_mono, normalize_mono
 from model.presets import ModelConfig
 from model.stereo.raft import StereoBranch, StereoResult
 from model.stereo.raft_stereo import RaftStereoBranch
+from model.stereo.selective_raft import SelectiveRaftBranch
 from model.vlm import make_vlm
 
 # Parameters under these prefixes are frozen backbones: never trained, never stored in checkpoints
 # (their LoRA adapters, named "lora_", are).
 FROZEN_PREFIXES = ("mono.backbone.", "vlm.backbone.")
+# The stereo-only networks by model.architecture: images normalised to [−1, 1] → StereoResult.
+BASELINE_BRANCHES: dict[str, type[nn.Module]] = {"raft-stereo": RaftStereoBranch,
+                                                 "selective-raft": SelectiveRaftBranch}
 
 
 @dataclass
@@ -48,10 +53,11 @@ class FusionNetwork(nn.Module):
         super().__init__()
         self.config = config
         self.factor = 2**config.n_downsample
-        # RAFT-Stereo's context comes from an image encoder of its own: no mono branch at all.
+        # A baseline's context comes from an image encoder of its own: no mono branch at all.
         self.mono = make_mono(config) if config.architecture == "fusion" else None
-        self.stereo_branch: StereoBranch | RaftStereoBranch = (
-            StereoBranch(config, self.mono.feature_channels) if self.mono is not None else RaftStereoBranch(config))
+        self.stereo_branch: nn.Module = (
+            StereoBranch(config, self.mono.feature_channels) if self.mono is not None
+            else BASELINE_BRANCHES[config.architecture](config))
         self.vlm = make_vlm(config) if config.use_vlm else None
         condition_dim = self.vlm.dim if self.vlm is not None else 0
         # Built only where they are used: DDP requires every parameter to get a gradient.
@@ -70,7 +76,6 @@ class FusionNetwork(nn.Module):
         all_iterates = self.training if all_iterates is None else all_iterates
         left_n, right_n = 2 * (left / 255.0) - 1, 2 * (right / 255.0) - 1
         if self.mono is None:
-            assert isinstance(self.stereo_branch, RaftStereoBranch)
             stereo = self.stereo_branch(left_n, right_n, iters=iters, all_iterates=all_iterates)
             return _stereo_only(stereo, torch.zeros_like(left[:, :1]))
         # Stereo only: the context encoder sees the left image beside a constant, never the mono input.

@@ -22,6 +22,8 @@ from typing import Any, Literal
 PRESETS: tuple[str, ...] = ("lite", "paper")
 BASELINE_PRESETS: tuple[str, ...] = ("raft-stereo",)
 ALL_PRESETS: tuple[str, ...] = PRESETS + BASELINE_PRESETS
+# Networks that only published files fill (`checkpoints import`): loadable, not offered for training.
+IMPORT_PRESETS: tuple[str, ...] = ("selective-raft",)
 PRESET_DIR = Path(__file__).parent / "presets"
 # RAFT-Stereo's demo pads a pair centred to a multiple of 32 (its InputPadder); an imported
 # checkpoint predicts what the demo does only with the same padding (instance norm sees it).
@@ -30,7 +32,9 @@ RAFT_STEREO_PAD = 32
 MonoBackend = Literal["precomputed", "depth-anything-v2"]
 VlmBackend = Literal["lite", "qwen2-vl"]
 FusionRule = Literal["paper", "released"]
-Architecture = Literal["fusion", "raft-stereo"]
+Architecture = Literal["fusion", "raft-stereo", "selective-raft"]
+# The stereo-only networks of other papers, each with the centred padding of its demo.
+BASELINE_ARCHITECTURES: tuple[str, ...] = ("raft-stereo", "selective-raft")
 ContextNorm = Literal["batch", "instance", "group", "none"]
 UpsampleBorder = Literal["edge", "zeros"]
 ConfidenceTarget = Literal["threshold", "closer"]
@@ -124,7 +128,7 @@ class ModelConfig:
         """What both image sides must be a multiple of, in pixels: the GRU's coarsest level, the
         flow's tokens and the lite VLM's patches all tile the image exactly (its EfficientNet-Lite0
         eye's stride 16 divides the GRU's coarsest level, 2**(n_downsample + 2) ≥ 16)."""
-        if self.architecture == "raft-stereo":
+        if self.architecture in BASELINE_ARCHITECTURES:
             return 2 ** (self.n_downsample + self.gru_levels - 1)
         multiples = [2 ** (self.n_downsample + 2), 2**self.token_downsample]
         if self.use_vlm and self.vlm_backend == "lite" and self.vlm_eye == "patches":
@@ -133,10 +137,10 @@ class ModelConfig:
 
     @property
     def inference_padding(self) -> tuple[int, bool]:
-        """How a predictor pads a pair: (to a multiple of this many pixels, centred). RAFT-Stereo pads
-        centred to 32 with replication, as its demo does; the fusion network bottom/right to its
-        size multiple."""
-        if self.architecture == "raft-stereo":
+        """How a predictor pads a pair: (to a multiple of this many pixels, centred). RAFT-Stereo and
+        Selective-RAFT pad centred to 32 with replication, as their demos do; the fusion network
+        bottom/right to its size multiple."""
+        if self.architecture in BASELINE_ARCHITECTURES:
             return math.lcm(RAFT_STEREO_PAD, self.size_multiple), True
         return self.size_multiple, False
 
@@ -148,9 +152,9 @@ class ModelConfig:
         if self.architecture == "fusion" and (self.gru_levels != 3 or self.shared_backbone or self.slow_fast_gru):
             raise ValueError("model.gru_levels other than 3, model.shared_backbone and model.slow_fast_gru are "
                              "RAFT-Stereo's: they need model.architecture = 'raft-stereo'")
-        if self.architecture == "raft-stereo" and (self.use_mono or self.use_vlm):
-            raise ValueError("model.architecture = 'raft-stereo' is stereo only: it needs model.use_mono = false "
-                             "and model.use_vlm = false")
+        if self.architecture in BASELINE_ARCHITECTURES and (self.use_mono or self.use_vlm):
+            raise ValueError(f"model.architecture = '{self.architecture}' is stereo only: it needs model.use_mono = "
+                             "false and model.use_vlm = false")
         if min(self.encoder_blocks[1:]) < 1:
             raise ValueError("model.encoder_blocks: the two strided stages need at least one block each")
         if self.token_downsample < self.n_downsample:
@@ -243,7 +247,7 @@ class Config:
 def load_preset(name: str, overrides: Mapping[str, Any] | None = None) -> Config:
     """The preset ``name`` (one of ALL_PRESETS) with ``overrides`` applied: keys "section.field" or a
     field name found in one section only. ValueError naming an unknown preset, key or bad value."""
-    if name not in ALL_PRESETS:
+    if name not in ALL_PRESETS + IMPORT_PRESETS:
         raise ValueError(f"unknown model preset {name!r}; choose one of {', '.join(ALL_PRESETS)}")
     with open(PRESET_DIR / f"{name}.toml", "rb") as handle:
         data = tomllib.load(handle)

@@ -13,6 +13,10 @@ show one of those layouts, and otherwise from the importer's flags (:class:`Flag
 layout is refused, naming the flags to give, never imported on a guess. Convex upsampling pads with
 zeros, as RAFT-Stereo does.
 
+The encoders' key map (:func:`encoder_prefixes`), the loader (:func:`load_mapped`) and the writer
+(:func:`import_file`) serve the networks built on RAFT-Stereo's encoders too
+(model/selective_raft_import.py).
+
 Two kinds of the file's tensors have no place of their own: RAFT-Stereo's residual blocks hold their
 shortcut's norm twice (``norm3`` and ``downsample.1``, one module), and with fewer than 3 GRU levels
 its coarsest GRU and context stage exist but never run (``gru32``, ``layer5``, ``outputs32``).
@@ -22,8 +26,8 @@ from __future__ import annotations
 
 import hashlib
 import re
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, fields
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -63,22 +67,34 @@ class Flags:
     iterations: int | None = None
 
 
-def _prefixes() -> list[tuple[str, str]]:
-    """(RAFT-Stereo's key prefix, this network's), longest first: module for module the same layout."""
+FLAGS = tuple(field.name for field in fields(Flags))  # a RAFT-Stereo file may need any of them
+
+
+def encoder_prefixes() -> list[tuple[str, str]]:
+    """(key prefix, this network's) for what RAFT-Stereo shares with the networks built on it
+    (Selective-RAFT): its BasicEncoder ``fnet``, MultiBasicEncoder ``cnet`` (stages ``layer4``/``5``
+    and the heads ``outputs08/16/32`` per GRU level), the motion encoder and the mask head."""
     pairs = [("fnet.conv1.", "features.stem.0."), ("fnet.norm1.", "features.stem.1."), ("fnet.conv2.", "features.out."),
              ("cnet.conv1.", "cnet.trunk.stem.0."), ("cnet.norm1.", "cnet.trunk.stem.1."),
-             ("conv2.", "match_head."), ("context_zqr_convs.", "zqr."),
-             ("update_block.flow_head.conv1.", "update.flow_head.0."),
-             ("update_block.flow_head.conv2.", "update.flow_head.2."), ("update_block.mask.", "update.mask.net.")]
+             ("update_block.mask.", "update.mask.net.")]
     for encoder, ours in (("fnet", "features"), ("cnet", "cnet.trunk")):
         pairs += [(f"{encoder}.layer{stage}.{block}.", f"{ours}.layers.{2 * (stage - 1) + block}.")
                   for stage in (1, 2, 3) for block in (0, 1)]
     pairs += [(f"cnet.layer{stage}.", f"cnet.down.{stage - 4}.") for stage in (4, 5)]
     for level, resolution in enumerate(("08", "16", "32")):
         pairs += [(f"cnet.outputs{resolution}.{head}.", f"cnet.{('hidden', 'context')[head]}.{level}.") for head in (0, 1)]
-        pairs.append((f"update_block.gru{resolution}.", f"update.grus.{level}."))
     pairs += [(f"update_block.encoder.{theirs}.", f"update.motion.{ours}.") for theirs, ours in
               (("convc1", "corr.0"), ("convc2", "corr.2"), ("convf1", "disp.0"), ("convf2", "disp.2"), ("conv", "out"))]
+    return pairs
+
+
+def _prefixes() -> list[tuple[str, str]]:
+    """(RAFT-Stereo's key prefix, this network's), longest first: module for module the same layout."""
+    pairs = encoder_prefixes() + [
+        ("conv2.", "match_head."), ("context_zqr_convs.", "zqr."),
+        ("update_block.flow_head.conv1.", "update.flow_head.0."), ("update_block.flow_head.conv2.", "update.flow_head.2.")]
+    pairs += [(f"update_block.gru{resolution}.", f"update.grus.{level}.")
+              for level, resolution in enumerate(("08", "16", "32"))]
     return sorted(pairs, key=lambda pair: -len(pair[0]))
 
 
@@ -88,10 +104,11 @@ _LEVELLED = re.compile(r"update\.grus\.(\d)\.|cnet\.(?:hidden|context)\.(\d)\.|c
 _DUPLICATE = re.compile(r"\.norm3\.")
 
 
-def to_ours(key: str) -> str | None:
-    """This network's key (under the branch) for a RAFT-Stereo key, or None for one it has no place for.
-    Inside residual blocks RAFT-Stereo's ``downsample`` is the shortcut, ``skip`` here."""
-    for theirs, ours in _PREFIXES:
+def to_ours(key: str, prefixes: list[tuple[str, str]] = _PREFIXES) -> str | None:
+    """This network's key (under the branch) for a RAFT-Stereo key (``prefixes``: another network's
+    table, longest first), or None for one it has no place for. Inside residual blocks RAFT-Stereo's
+    ``downsample`` is the shortcut, ``skip`` here."""
+    for theirs, ours in prefixes:
         if key.startswith(theirs):
             return ours + key[len(theirs):].replace("downsample.", "skip.")
     return None
@@ -107,15 +124,20 @@ def _never_run(key: str, levels: int) -> bool:
     return int(gru or head or int(stage) + 1) >= levels
 
 
-def to_theirs(key: str) -> str:
-    """The RAFT-Stereo key for this network's key (under the branch): what a file lacks, in its terms."""
-    for theirs, ours in sorted(_PREFIXES, key=lambda pair: -len(pair[1])):
+def to_theirs(key: str, prefixes: list[tuple[str, str]] = _PREFIXES) -> str:
+    """The RAFT-Stereo key (or ``prefixes``' network's) for this network's key (under the branch): what
+    a file lacks, in its terms."""
+    for theirs, ours in sorted(prefixes, key=lambda pair: -len(pair[1])):
         if key.startswith(ours):
             return theirs + key[len(ours):].replace("skip.", "downsample.")
     return key
 
 
-class NotRaftStereo(ValueError):
+class NotImportable(ValueError):
+    """A file that is not a checkpoint of the network it is imported as (the message says why)."""
+
+
+class NotRaftStereo(NotImportable):
     """A file that is none of RAFT-Stereo's checkpoints (the message says what is missing or unknown)."""
 
 
@@ -204,22 +226,22 @@ def _unsettled(tensors: str, planes: int, published: tuple[str, str, bool, int] 
     return norm, bool(slow_fast), corr, iterations
 
 
-def convert(state: Mapping[str, Any], flags: Flags = Flags()) -> Conversion:
-    """A RAFT-Stereo state dict (as loaded; ``module.`` optional) → the ``raft-stereo`` network's
-    config (its test iterations the architecture's documented ones) and state; ``flags``: what the
-    tensors do not settle (:func:`infer_architecture`). NotRaftStereo naming what is missing, unknown or
-    of the wrong shape, or the flags to give."""
+def tensors_only(state: Mapping[str, Any], error: type[NotImportable] = NotRaftStereo) -> dict[str, Tensor]:
+    """``state`` without DataParallel's ``module.``; ``error`` when a value is not a tensor."""
     state = strip_module(state)
     not_tensors = [key for key, value in state.items() if not isinstance(value, torch.Tensor)]
     if not_tensors:
-        raise NotRaftStereo(f"not a state dict of tensors: {not_tensors[0]} is a {type(state[not_tensors[0]]).__name__}")
-    arch = infer_architecture(state, flags)
-    config = load_preset(SOURCE, {
-        "n_downsample": arch["n_downsample"], "gru_levels": arch["gru_levels"],
-        "hidden_dims": [arch["hidden"]] * 3, "shared_backbone": arch["shared_backbone"],
-        "context_norm": arch["context_norm"], "slow_fast_gru": arch["slow_fast_gru"], "feature_dim": arch["feature_dim"],
-        "corr_levels": arch["corr_levels"], "corr_radius": arch["corr_radius"], "upsample_border": "zeros",
-        "amp": False, "test_iters": arch["iterations"]})  # as its demo: float32
+        raise error(f"not a state dict of tensors: {not_tensors[0]} is a {type(state[not_tensors[0]]).__name__}")
+    return state
+
+
+def load_mapped(state: Mapping[str, Tensor], config: Config, prefixes: list[tuple[str, str]], levels: int,
+                error: type[NotImportable], name: str) -> tuple[FusionNetwork, int, list[str]]:
+    """The network of ``config`` with every tensor of ``state`` (a file's, ``module.`` stripped) in
+    its place by ``prefixes`` (the file's key prefix → ours, longest first; ``levels``: GRU levels run).
+    Returns (the network in eval mode, ``norm3`` duplicates skipped, keys the file's own code never runs
+    at this architecture); ``error`` (naming the network ``name``) for an unknown, missing, misshapen
+    or non-finite tensor."""
     network = FusionNetwork(config.model)
     expected = network.state_dict()
     mapped: dict[str, Tensor] = {}
@@ -228,25 +250,43 @@ def convert(state: Mapping[str, Any], flags: Flags = Flags()) -> Conversion:
         if _DUPLICATE.search(key) and _DUPLICATE.sub(".downsample.1.", key) in state:
             duplicates += 1
             continue
-        target = to_ours(key)
+        target = to_ours(key, prefixes)
         if target is not None and PREFIX + target in expected:
             mapped[PREFIX + target] = tensor
-        elif target is not None and _never_run(target, arch["gru_levels"]):
+        elif target is not None and _never_run(target, levels):
             unused.append(key)
         else:
             unknown.append(key)
-    missing = [to_theirs(key.removeprefix(PREFIX)) for key in expected if key not in mapped]
+    missing = [to_theirs(key.removeprefix(PREFIX), prefixes) for key in expected if key not in mapped]
     if unknown or missing:
         parts = ([f"unknown {_few(unknown)}"] if unknown else []) + ([f"missing {_few(missing)}"] if missing else [])
-        raise NotRaftStereo(f"not the RAFT-Stereo layout its tensors suggest: {'; '.join(parts)}")
+        raise error(f"not the {name} layout its tensors suggest: {'; '.join(parts)}")
     for key, tensor in mapped.items():
-        theirs = to_theirs(key.removeprefix(PREFIX))
+        theirs = to_theirs(key.removeprefix(PREFIX), prefixes)
         if tuple(tensor.shape) != tuple(expected[key].shape):
-            raise NotRaftStereo(f"{theirs} has shape {tuple(tensor.shape)}, expected {tuple(expected[key].shape)}")
+            raise error(f"{theirs} has shape {tuple(tensor.shape)}, expected {tuple(expected[key].shape)}")
         if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all()):
-            raise NotRaftStereo(f"{theirs} holds values that are not finite")
-    network.load_state_dict(mapped, strict=True)
-    return Conversion(config, network.eval(), arch, len(state), duplicates, unused)
+            raise error(f"{theirs} holds values that are not finite")
+    network.load_state_dict(mapped, strict=True)  # copied into the network's float32 parameters
+    return network.eval(), duplicates, unused
+
+
+def convert(state: Mapping[str, Any], flags: Flags = Flags()) -> Conversion:
+    """A RAFT-Stereo state dict (as loaded; ``module.`` optional) → the ``raft-stereo`` network's
+    config (its test iterations the architecture's documented ones) and state; ``flags``: what the
+    tensors do not settle (:func:`infer_architecture`). NotRaftStereo naming what is missing, unknown or
+    of the wrong shape, or the flags to give."""
+    state = tensors_only(state)
+    arch = infer_architecture(state, flags)
+    config = load_preset(SOURCE, {
+        "n_downsample": arch["n_downsample"], "gru_levels": arch["gru_levels"],
+        "hidden_dims": [arch["hidden"]] * 3, "shared_backbone": arch["shared_backbone"],
+        "context_norm": arch["context_norm"], "slow_fast_gru": arch["slow_fast_gru"], "feature_dim": arch["feature_dim"],
+        "corr_levels": arch["corr_levels"], "corr_radius": arch["corr_radius"], "upsample_border": "zeros",
+        "amp": False, "test_iters": arch["iterations"]})  # as its demo: float32
+    network, duplicates, unused = load_mapped(state, config, _PREFIXES, arch["gru_levels"], NotRaftStereo,
+                                              "RAFT-Stereo")
+    return Conversion(config, network, arch, len(state), duplicates, unused)
 
 
 def _few(keys: list[str]) -> str:
@@ -260,21 +300,24 @@ def read_published(path: Path) -> dict[str, Any]:
 
     state = read_weights_only(Path(path), Path(path).name)
     if not isinstance(state, Mapping):
-        raise NotRaftStereo(f"{Path(path).name} holds a {type(state).__name__}, not a state dict")
+        raise NotImportable(f"{Path(path).name} holds a {type(state).__name__}, not a state dict")
     return dict(state)
 
 
-def import_file(path: Path, destination: Path, flags: Flags = Flags()) -> dict[str, Any]:
-    """Convert the published file ``path`` (what its tensors do not settle from ``flags``) and write it, as
-    a checkpoint of this project's format, to ``destination`` (atomically). Returns ``{"architecture",
-    "config", "keys_loaded", "tensors_in_file", "duplicates", "unused"}``."""
+def import_file(path: Path, destination: Path, flags: Flags = Flags(), *,
+                converter: Callable[[Mapping[str, Any], Flags], Conversion] = convert,
+                source: str = SOURCE) -> dict[str, Any]:
+    """Convert the published file ``path`` (what its tensors do not settle from ``flags``; ``converter``:
+    another network's :func:`convert`, ``source`` its name) and write it, as a checkpoint of this
+    project's format, to ``destination`` (atomically). Returns ``{"architecture", "config",
+    "keys_loaded", "tensors_in_file", "duplicates", "unused"}``."""
     from model.checkpoint import save_checkpoint
 
-    conversion = convert(read_published(path), flags)
+    conversion = converter(read_published(path), flags)
     digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
-    source = {"from": SOURCE, "file": Path(path).name, "sha256": digest, "architecture": conversion.architecture,
-              "imported_at": datetime.now(UTC).isoformat(timespec="seconds")}
-    save_checkpoint(destination, conversion.network, conversion.config, step=0, source=source)
+    meta = {"from": source, "file": Path(path).name, "sha256": digest, "architecture": conversion.architecture,
+            "imported_at": datetime.now(UTC).isoformat(timespec="seconds")}
+    save_checkpoint(destination, conversion.network, conversion.config, step=0, source=meta)
     return {"architecture": conversion.architecture, "config": conversion.config,
             "keys_loaded": len(conversion.network.state_dict()),
             "tensors_in_file": conversion.tensors_in_file, "duplicates": conversion.duplicates,

@@ -30,8 +30,12 @@ def _canonical(name: str) -> str:
     return name.replace(".norm3.", ".downsample.1.")
 
 
-def raft_state(keys: Sequence[tuple[str, Sequence[int]]], seed: int) -> dict[str, torch.Tensor]:
-    """The state dict for ``keys`` ((name, shape) in file order) and ``seed``."""
+def raft_state(keys: Sequence[tuple[str, Sequence[int]]], seed: int, *, head: str = ".flow_head.conv2.",
+               far_statistics: bool = False) -> dict[str, torch.Tensor]:
+    """The state dict for ``keys`` ((name, shape) in file order) and ``seed``; ``head``: the key part of
+    the layer scaled by HEAD_GAIN (Selective-RAFT's ``.disp_head.conv2.``); ``far_statistics``: batch
+    norm far from identity (running means ~N(0, 0.5²), variances log-uniform in [1/4, 4], scales
+    ~N(1, 0.3²), shifts ~N(0, 0.2²)), so that a network that skipped or misread them would show."""
     generator = torch.Generator().manual_seed(seed)
     values: dict[str, torch.Tensor] = {}
 
@@ -46,15 +50,18 @@ def raft_state(keys: Sequence[tuple[str, Sequence[int]]], seed: int) -> dict[str
             if leaf == "num_batches_tracked":
                 value = torch.tensor(0, dtype=torch.int64)
             elif leaf == "running_mean":
-                value = normal(shape, 0.1)
+                value = normal(shape, 0.5 if far_statistics else 0.1)
             elif leaf == "running_var":
-                value = 1.0 + 0.2 * torch.rand(tuple(shape), generator=generator)
+                value = (4.0 ** (2 * torch.rand(tuple(shape), generator=generator) - 1) if far_statistics
+                         else 1.0 + 0.2 * torch.rand(tuple(shape), generator=generator))
             elif len(shape) == 4:
                 fan_in = shape[1] * shape[2] * shape[3]
-                gain = HEAD_GAIN if ".flow_head.conv2." in canonical else 1.0
+                gain = HEAD_GAIN if head in canonical else 1.0
                 value = normal(shape, gain * (1.0 / fan_in) ** 0.5)
             elif leaf == "weight":  # a norm's affine scale
-                value = normal(shape, 0.1, 1.0)
+                value = normal(shape, 0.3 if far_statistics else 0.1, 1.0)
+            elif far_statistics and (".norm" in canonical or canonical.endswith("downsample.1.bias")):
+                value = normal(shape, 0.2)  # a norm's affine shift
             else:
                 value = normal(shape, 0.02)
             values[canonical] = value
@@ -62,16 +69,29 @@ def raft_state(keys: Sequence[tuple[str, Sequence[int]]], seed: int) -> dict[str
     return state
 
 
-def load_fixture(name: str) -> dict[str, Any]:
-    """One architecture's fixture: its JSON (flags, seed, keys, iterations) with the npz arrays
-    (``left``, ``right`` uint8 H×W×3, ``disparity`` float32 H×W, the reference's output) added."""
-    with open(FIXTURES / f"{name}.json", encoding="utf-8") as handle:
+def load_fixture(name: str, directory: Path = FIXTURES) -> dict[str, Any]:
+    """One architecture's fixture in ``directory``: its JSON (flags, seed, keys, iterations) with the npz
+    arrays (``disparity`` float32 H×W, the reference's output; ``left``, ``right`` uint8 H×W×3 unless
+    the JSON names the pair, see :func:`motorcycle_pair`) added."""
+    with open(directory / f"{name}.json", encoding="utf-8") as handle:
         fixture = json.load(handle)
-    with np.load(FIXTURES / f"{name}.npz") as arrays:
+    with np.load(directory / f"{name}.npz") as arrays:
         fixture.update({key: arrays[key] for key in arrays.files})
+    if fixture.get("pair") == "motorcycle":
+        fixture["left"], fixture["right"] = motorcycle_pair(fixture["stride"])
     return fixture
 
 
 def fixture_state(fixture: dict[str, Any]) -> dict[str, torch.Tensor]:
     """The fixture's weights, keys as in a published file (``module.`` prefixed)."""
-    return raft_state([(key, shape) for key, shape in fixture["keys"]], fixture["seed"])
+    return raft_state([(key, shape) for key, shape in fixture["keys"]], fixture["seed"], **fixture.get("weights", {}))
+
+
+def motorcycle_pair(stride: int) -> tuple[np.ndarray, np.ndarray]:
+    """scikit-image's Middlebury 2014 Motorcycle pair (741×500, shipped in its wheel: no download), every
+    ``stride``-th pixel (plain slicing, no resampling library's rounding): a real pair, uint8 H×W×3.
+    Stride 3 gives 167×247, sides that are not multiples of 32."""
+    import skimage.data
+
+    left, right, _ = skimage.data.stereo_motorcycle()
+    return (np.ascontiguousarray(left[::stride, ::stride, :3]), np.ascontiguousarray(right[::stride, ::stride, :3]))

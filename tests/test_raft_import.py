@@ -174,4 +174,4 @@ def test_the_cli_refuses_an_unsettled_layout_until_its_flags_are_given(home: Pat
     payload = load_checkpoint(home / "checkpoints" / "imported" / "custom.pt")
     assert payload["config"]["train"]["test_iters"] == 20
     wrong = _cli(home, "checkpoints", "import", "--from", "depth-anything-v2", str(custom), "--slow-fast")
-    assert wrong.exit_code != 0 and "architecture flags are for RAFT-Stereo files" in wrong.output
+    assert wrong.exit_code != 0 and "architecture flags are for stereo networks' files" in wrong.output

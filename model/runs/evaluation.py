@@ -23,7 +23,7 @@ from dataset.services.errors import InvalidInput, NotFound
 from dataset.services.evaluations import checkpoint_label, dataset_label
 from dataset.services.jobs import JobContext
 from model.evaluate import DEFAULT_THRESHOLDS, RESOLUTIONS, EvalOptions, evaluate, iter_reader
-from model.methods import NETWORK_METHODS, Mono, NetworkRuns, SgbmParams, build_methods, relative_pfm
+from model.methods import BASELINE_METHODS, NETWORK_METHODS, Mono, NetworkRuns, SgbmParams, build_methods, relative_pfm
 from model.runs import registry
 from model.runs.report import PredictionWriter, ranked_samples, write_pictures, write_report
 from model.runs.schema import EvaluationLaunch, FieldError, FolderRef, checkpoint_text
@@ -59,8 +59,9 @@ def evaluation_params(request: EvaluationLaunch, settings: Any, session: Session
     the checkpoint's run) — samples its training never read.
     """
     shell = shell or EvalShellOptions()
-    if "raft_stereo" in request.methods and "raft_stereo" not in request.checkpoints | shell.checkpoints:
-        raise FieldError("checkpoints", "raft-stereo needs its own checkpoint, e.g. imported:raftstereo-sceneflow")
+    for method, baseline in BASELINE_METHODS.items():
+        if method in request.methods and method not in request.checkpoints | shell.checkpoints:
+            raise FieldError("checkpoints", f"{baseline.architecture} needs its own checkpoint, e.g. {baseline.example}")
     source = _checkpoint_source(request, settings, session, shell)
     own = {m: _method_source(request, m, settings, session, shell) for m in request.methods
            if m in request.checkpoints or m in shell.checkpoints}

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import fcntl
 import functools
+import importlib
 import json
 import os
 import re
@@ -228,22 +229,35 @@ def resolve_depth_model(settings: Any | None, text: str) -> ResolvedCheckpoint:
     return ResolvedCheckpoint(path, text)
 
 
-IMPORT_SOURCES = ("raft-stereo", "depth-anything-v2")
+# Stereo networks whose published files import (`checkpoints import --from SOURCE`): the module
+# holding each one's ``convert`` and ``FLAGS`` (the model.raft_import.Flags fields its files may need).
+STEREO_IMPORTERS: dict[str, str] = {"raft-stereo": "model.raft_import", "selective-raft": "model.selective_raft_import"}
+IMPORT_SOURCES = (*STEREO_IMPORTERS, "depth-anything-v2")
+# How the CLI spells each architecture flag (model.raft_import.Flags' fields).
+FLAG_OPTIONS = {"context_norm": "--context-norm", "slow_fast_gru": "--slow-fast", "corr_levels": "--corr-levels",
+                "corr_radius": "--corr-radius", "iterations": "--iters"}
 
 
 def import_checkpoint(settings: Any, file: Path, *, source: str, name: str | None = None,
                       replace: bool = False, flags: Any = None) -> dict[str, Any]:
     """Convert the published checkpoint ``file`` (``source``: one of IMPORT_SOURCES) and register it
-    in the workspace as ``imported:NAME`` (default NAME: the file's stem): a RAFT-Stereo file as
-    ``NAME.pt``, a Depth Anything V2 one as the directory ``NAME/``. Returns ``{"checkpoint":
-    the name, "architecture", "keys_loaded", …}``; InvalidInput for a bad name or a file that is not
-    such a checkpoint (one line), Conflict when the name is taken and ``replace`` is not given.
-    ``flags``: a RAFT-Stereo file's architecture where its tensors do not settle it
-    (``model.raft_import.Flags``; InvalidInput for another source)."""
+    in the workspace as ``imported:NAME`` (default NAME: the file's stem): a stereo network's file
+    (STEREO_IMPORTERS) as ``NAME.pt``, a Depth Anything V2 one as the directory ``NAME/``. Returns
+    ``{"checkpoint": the name, "architecture", "keys_loaded", …}``; InvalidInput for a bad name or a
+    file that is not such a checkpoint (one line), Conflict when the name is taken and ``replace`` is
+    not given. ``flags``: a stereo file's architecture where its tensors do not settle it
+    (``model.raft_import.Flags``; InvalidInput for a flag its network has no use for)."""
     if source not in IMPORT_SOURCES:
         raise InvalidInput(f"unknown checkpoint source {source!r}; choose one of {', '.join(IMPORT_SOURCES)}")
-    if flags is not None and source != "raft-stereo":
-        raise InvalidInput(f"architecture flags are for RAFT-Stereo files; a {source} file's tensors settle its own")
+    if flags is not None and source not in STEREO_IMPORTERS:
+        raise InvalidInput(f"architecture flags are for stereo networks' files (RAFT-Stereo, Selective-RAFT); "
+                           f"a {source} file's tensors settle its own")
+    importer = importlib.import_module(STEREO_IMPORTERS[source]) if source in STEREO_IMPORTERS else None
+    if importer is not None and flags is not None:
+        refused = [FLAG_OPTIONS[field] for field, value in vars(flags).items()
+                   if value is not None and field not in importer.FLAGS]
+        if refused:
+            raise InvalidInput(f"{', '.join(refused)}: not an option of {source} files (its code fixes it or never reads it)")
     name = name or re.sub(r"[^A-Za-z0-9._-]", "-", Path(file).stem).lstrip("._-")[:64] or source
     stereo, depth = imported_path(Path(settings.home), name), imported_model_dir(Path(settings.home), name)
     # One namespace for both kinds: imported:NAME must name one thing.
@@ -255,16 +269,17 @@ def import_checkpoint(settings: Any, file: Path, *, source: str, name: str | Non
         raise Conflict(f"{IMPORTED}:{name} exists; choose another name or replace it")
     if destination.is_symlink():
         raise Conflict(f"{IMPORTED}:{name} is a symbolic link, not the workspace's own checkpoint; remove it first")
-    if source == "depth-anything-v2":
+    if importer is None:
         from annotation.depth.depth_anything_import import import_file as import_depth
         from model.checkpoint import read_weights_only
 
         import_file = functools.partial(import_depth, read=read_weights_only)
     else:
         from model.raft_import import Flags
-        from model.raft_import import import_file as import_raft
+        from model.raft_import import import_file as import_stereo
 
-        import_file = functools.partial(import_raft, flags=flags or Flags())
+        import_file = functools.partial(import_stereo, flags=flags or Flags(), converter=importer.convert,
+                                        source=source)
     try:
         result = import_file(Path(file), destination)
     except ValueError as exc:  # not a checkpoint of that source, unreadable, or a pickle naming code

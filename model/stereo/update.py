@@ -15,7 +15,8 @@ from model.stereo.upsample import MaskHead
 
 class ConvGRU(nn.Module):
     """A convolutional GRU cell whose gates also get per-pixel context terms (cz, cr, cq),
-    computed once per forward from the context features."""
+    computed once per forward from the context features; ``context`` None: plain gates (RAFT's
+    ConvGRU, which Selective-RAFT feeds its context as an input instead)."""
 
     def __init__(self, hidden: int, inputs: int, kernel: int = 3) -> None:
         super().__init__()
@@ -23,8 +24,8 @@ class ConvGRU(nn.Module):
         self.convr = nn.Conv2d(hidden + inputs, hidden, kernel, padding=kernel // 2)
         self.convq = nn.Conv2d(hidden + inputs, hidden, kernel, padding=kernel // 2)
 
-    def forward(self, h: Tensor, context: Sequence[Tensor], *x: Tensor) -> Tensor:
-        cz, cr, cq = context
+    def forward(self, h: Tensor, context: Sequence[Tensor] | None, *x: Tensor) -> Tensor:
+        cz, cr, cq = context if context is not None else (0, 0, 0)
         inputs = torch.cat(x, dim=1)
         hx = torch.cat([h, inputs], dim=1)
         z = torch.sigmoid(self.convz(hx) + cz)

@@ -42,10 +42,13 @@ function launchBody() {
   } else if (f.run.value) {
     body.run = Number(f.run.value);
   }
-  // Checkpoints by name, as `predict --checkpoint` takes them; raft-stereo scores its own.
+  // Checkpoints by name, as `predict --checkpoint` takes them; each baseline (raft-stereo,
+  // selective-raft) scores its own.
   if (f.checkpoint.value) body.checkpoint = f.checkpoint.value;
-  if (body.methods.includes("raft_stereo") && f.raft_stereo_checkpoint.value) {
-    body.checkpoints = { raft_stereo: f.raft_stereo_checkpoint.value };
+  for (const select of form.querySelectorAll("select[data-baseline]")) {
+    if (body.methods.includes(select.dataset.baseline) && select.value) {
+      body.checkpoints = { ...body.checkpoints, [select.dataset.baseline]: select.value };
+    }
   }
   if (body.methods.includes("predictions")) {
     body.predictions = { root: f.predictions_root.value, path: f.predictions_path.value.trim() };
@@ -72,7 +75,7 @@ form.addEventListener("submit", async (event) => {
 keyboardHelp([], {
   note: "Score methods on a run's held-out test split (samples its training never read) or on a folder inside a " +
     "registered dataset root. fusion, stereo and mono-align use the chosen checkpoint, raft-stereo its own (an imported " +
-    "RAFT-Stereo checkpoint, or a raft-stereo run's); best and last are pinned to " +
+    "RAFT-Stereo checkpoint, or a raft-stereo run's), selective-raft its own (an imported Selective-RAFT one); best and last are pinned to " +
     "their step when the evaluation is launched. A refused launch names its field under it.",
 });
 

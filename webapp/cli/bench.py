@@ -171,12 +171,16 @@ def memory_benchmark(as_json: bool) -> None:
 @click.option("--train-steps", type=click.IntRange(min=1), default=3, show_default=True)
 @click.option("--no-raft-stereo", "no_raft_stereo", is_flag=True,
               help="Skip RAFT-Stereo's network (32 iterations at 1080p: minutes on a CPU).")
-def model_benchmark(as_json: bool, repeats: int, train_steps: int, no_raft_stereo: bool) -> None:
-    """The lite fusion model on a 1080p pair (own process: seconds, peak MB) beside OpenCV SGBM and RAFT-Stereo's
-    network; parameters; train steps/s."""
+@click.option("--no-selective-raft", "no_selective_raft", is_flag=True,
+              help="Skip Selective-RAFT's network (32 iterations at 1080p: minutes on a CPU).")
+def model_benchmark(as_json: bool, repeats: int, train_steps: int, no_raft_stereo: bool,
+                    no_selective_raft: bool) -> None:
+    """The lite fusion model on a 1080p pair (own process: seconds, peak MB) beside OpenCV SGBM, RAFT-Stereo's
+    and Selective-RAFT's networks; parameters; train steps/s."""
     from benchmarks.model import run_model_bench
 
-    _report(run_model_bench(repeats=repeats, train_steps=train_steps, raft_stereo=not no_raft_stereo), as_json)
+    _report(run_model_bench(repeats=repeats, train_steps=train_steps, raft_stereo=not no_raft_stereo,
+                            selective_raft=not no_selective_raft), as_json)
 
 
 def _lite_overrides(ctx: click.Context, param: click.Parameter, values: tuple[str, ...]) -> dict[str, str]:

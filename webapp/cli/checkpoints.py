@@ -15,7 +15,8 @@ from webapp.cli.state import CliState, pass_state
 @click.command("import")
 @click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--from", "source", required=True, type=click.Choice(registry.IMPORT_SOURCES),
-              help="Whose checkpoint FILE is: raft-stereo (princeton-vl/RAFT-Stereo's published files) or "
+              help="Whose checkpoint FILE is: raft-stereo (princeton-vl/RAFT-Stereo's published files), "
+                   "selective-raft (Windsrain/Selective-Stereo's Selective-RAFT files) or "
                    "depth-anything-v2 (DepthAnything/Depth-Anything-V2's depth_anything_v2_vit*.pth).")
 @click.option("--name", default=None, help="Register it as imported:NAME (default: FILE's name, no extension).")
 @click.option("--replace", is_flag=True, help="Replace an imported checkpoint of that name.")
@@ -24,11 +25,13 @@ from webapp.cli.state import CliState, pass_state
                    "(instance or none) and is not a published layout.")
 @click.option("--slow-fast/--no-slow-fast", "slow_fast", default=None,
               help="RAFT-Stereo's --slow_fast_gru (no tensor holds it): needed unless the file is a published layout.")
-@click.option("--corr-levels", type=click.IntRange(1, 8), default=None, help="RAFT-Stereo's --corr_levels.")
-@click.option("--corr-radius", type=click.IntRange(1, 16), default=None, help="RAFT-Stereo's --corr_radius.")
+@click.option("--corr-levels", type=click.IntRange(1, 8), default=None,
+              help="--corr_levels (RAFT-Stereo, Selective-RAFT): needed unless the file is a published layout.")
+@click.option("--corr-radius", type=click.IntRange(1, 16), default=None,
+              help="--corr_radius (RAFT-Stereo, Selective-RAFT): needed unless the file is a published layout.")
 @click.option("--iters", type=click.IntRange(1, 256), default=None,
               help="Its default iterations for predict and evaluate (default: the published file's documented "
-                   "ones — realtime 7, the others 32 — else RAFT-Stereo's demo's 32).")
+                   "ones — RAFT-Stereo realtime 7, the others 32 — else the demo's 32).")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as one JSON object.")
 @pass_state
 def import_checkpoint(state: CliState, file: Path, source: str, name: str | None, replace: bool,
@@ -38,7 +41,8 @@ def import_checkpoint(state: CliState, file: Path, source: str, name: str | None
     tensors, map every key and register it; `predict --checkpoint imported:NAME` then runs it (a Depth
     Anything V2 file: `depth IMAGE --checkpoint imported:NAME`). Nothing is downloaded: each project's
     README says where its files are. A RAFT-Stereo file whose tensors show none of the published layouts
-    is refused unless the flags its tensors cannot settle are given (the refusal names them)."""
+    is refused unless the flags its tensors cannot settle are given (the refusal names them); so is a
+    Selective-RAFT file's, whose only unsettled options are the correlation's levels and radius."""
     given = {"context_norm": context_norm, "slow_fast_gru": slow_fast, "corr_levels": corr_levels,
              "corr_radius": corr_radius, "iterations": iters}
     flags = None
@@ -58,6 +62,14 @@ def import_checkpoint(state: CliState, file: Path, source: str, name: str | None
                    f"{arch['depth']} blocks, {arch['heads']} heads; neck {arch['neck_hidden_sizes']}, fusion "
                    f"{arch['fusion_hidden_size']}), relative depth, {result['keys_loaded']} tensors loaded "
                    f"({result['tensors_in_file']} in the file)")
+        return
+    if source == "selective-raft":
+        click.echo(f"{result['checkpoint']}: Selective-RAFT ({arch['published'] or 'a layout no published file has'}"
+                   f"), n_downsample {arch['n_downsample']}, {arch['gru_levels']} selective GRU levels of "
+                   f"{arch['hidden']}, corr {arch['corr_levels']} levels × radius {arch['corr_radius']}, "
+                   f"{arch['iterations']} iterations by default, {result['keys_loaded']} tensors loaded "
+                   f"({result['tensors_in_file']} in the file: {result['duplicates']} duplicates, "
+                   f"{len(result['unused'])} never used by Selective-RAFT at this architecture)")
         return
     click.echo(f"{result['checkpoint']}: RAFT-Stereo ({arch['published'] or 'a layout none of the published files has'}"
                f"), n_downsample {arch['n_downsample']}, {arch['gru_levels']} GRU levels of {arch['hidden']}, "

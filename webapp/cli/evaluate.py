@@ -31,7 +31,8 @@ METHOD_CHOICES = [m.replace("_", "-") for m in METHODS] + list(METHODS)
               help=f"Repeatable (default: {', '.join(m.replace('_', '-') for m in DEFAULT_METHODS)}).")
 @click.option("--checkpoint", "checkpoints", multiple=True, metavar="[METHOD=]CHECKPOINT",
               help="RUN:NAME, imported:NAME or a file: the network methods' (default: the current model); "
-                   "METHOD=… gives one method its own, e.g. raft-stereo=imported:raftstereo-sceneflow. Repeatable.")
+                   "METHOD=… gives one method its own, e.g. raft-stereo=imported:raftstereo-sceneflow or "
+                   "selective-raft=imported:sceneflow. Repeatable.")
 @click.option("--run", "run_id", type=int, help="A training run whose test split to evaluate on.")
 @click.option("--predictions", type=click.Path(exists=True, file_okay=False, path_type=Path),
               help="PFMs of another program: DIR/REL/x.pfm for left image REL/x.png (any resolution).")

@@ -27,7 +27,7 @@ from dataset.services.errors import NotFound
 from dataset.tables import Evaluation, Role, Sample
 from model.align import ALIGN_RULES
 from model.evaluate import RESOLUTIONS
-from model.methods import METHODS
+from model.methods import BASELINE_METHODS, METHODS
 from model.runs import registry
 from model.runs.evaluation import DEFAULT_METHODS
 from model.runs.report import DEPTH_METRICS, TABLE_METRICS
@@ -45,7 +45,7 @@ def index() -> ResponseReturnValue:
     settings = runtime().settings
     runs = [run_id for run_id, _ in training.recent_runs(g.db, 200)]
     return render_template("evaluations.html", formats=READER_FORMATS, methods=METHODS, default_methods=DEFAULT_METHODS,
-                           resolutions=list(RESOLUTIONS), align_rules=ALIGN_RULES, runs=runs,
+                           baselines=BASELINE_METHODS, resolutions=list(RESOLUTIONS), align_rules=ALIGN_RULES, runs=runs,
                            current=registry.current_model(settings), roots=sorted(settings.dataset_roots),
                            checkpoints=registry.named_checkpoints(g.db, settings.runs_dir),
                            imported=[f"{registry.IMPORTED}:{n}" for n in registry.imported_names(settings.home)])
