@@ -53,6 +53,11 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
                                            "code's infer_image(image, 518)."),
     "evaluate": ("webapp.cli.evaluate", "evaluate_cmd", "Evaluate METHODs: EPE and bad-x (and depth metrics where a camera "
                                                         "is known) per region."),
+    "table": ("webapp.cli.table", "table", "The paper's Table 1 (EPE, bad-x, depth metrics per region) for every method "
+                                           "this workspace has, on a dataset folder."),
+    "example-data": ("webapp.cli.examples", "example_data", "Write a small real dataset folder that needs no "
+                     "download: motorcycle (Middlebury 2014's Motorcycle as scikit-image ships it, 741×500, with ground "
+                     "truth and calibration; read it with --format middlebury)."),
     "media": ("webapp.cli.media", "media", "Media store housekeeping."),
 }
 
