@@ -47,9 +47,9 @@ import json
 import statistics
 import time
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from sqlalchemy import select
@@ -102,6 +102,12 @@ HELD_OUT_FRAMES = 2  # per held-out scene: frames of one scene are alike, so sce
 # (dataset.synthetic.layout): frames of one distribution for every kind, large mirrors, textureless and
 # repetitive walls, estimators that read a mirror as a surface beside ones it fools.
 SCENE_FAMILIES = True
+# The ground truth a capture carries: "surface", the first surface met (a mirror's glass) — the product's
+# truth; or "matcher", what a stereo matcher finds (a mirror's reflection, as deep as the scene it shows).
+# Pre-training on the matcher's truth stands for the paper's SceneFlow pre-training: data that never
+# teaches a network where glass is, so that it reports reflections, as published stereo networks do.
+Truth = Literal["surface", "matcher"]
+TRUTHS: tuple[Truth, ...] = ("surface", "matcher")
 SPLITS: dict[str, tuple[int, ...]] = {"test": TEST_SEEDS, "val": VAL_SEEDS}  # the realistic mono's held-out pairs
 CORRUPTION_SEEDS = tuple(range(3_000, 3_100))  # held out as well, rendered alike: the warp mono's pairs, no split
 MONO_FAMILIES = ("realistic", "warp")  # the held-out pairs' monocular input: the training estimator's family, or not
@@ -309,10 +315,13 @@ def pairs_digest(samples: Iterable[StereoSample]) -> str:
     return digest.hexdigest()
 
 
-def capture_video(seed: int, frames: int, families: bool = SCENE_FAMILIES) -> SyntheticVideo:
+def capture_video(seed: int, frames: int, families: bool = SCENE_FAMILIES, truth: Truth = "surface") -> SyntheticVideo:
     """Capture video ``seed`` as the benchmark (and its pre-training) imports it: ``frames`` frames at SIZE
-    and its :func:`capture_baseline`."""
-    return render_video(seed, frames, *SIZE, baseline_m=capture_baseline(seed), families=families)
+    and its :func:`capture_baseline`; ``truth`` (see TRUTHS) the disparity it carries as ground truth."""
+    video = render_video(seed, frames, *SIZE, baseline_m=capture_baseline(seed), families=families)
+    if truth == "matcher":
+        video = replace(video, frames=[replace(frame, disparity=frame.stereo_disparity) for frame in video.frames])
+    return video
 
 
 def capture_baseline(seed: int) -> float:
@@ -448,12 +457,13 @@ def prepared_workspace(home: Path) -> tuple[Runtime, bool, dict[str, Any]]:
     return rt, False, finish_workspace(home, recipe, conditions)
 
 
-def import_captures(rt: Runtime, seeds: Iterable[int], frames: int) -> dict[str, Any]:
-    """Render ``frames`` frames of each seed at its :func:`capture_baseline`, import them as captures and
-    accept them (one transaction per video); the conditions they show (:func:`condition_ranges`)."""
+def import_captures(rt: Runtime, seeds: Iterable[int], frames: int, truth: Truth = "surface") -> dict[str, Any]:
+    """Render ``frames`` frames of each seed at its :func:`capture_baseline`, import them as captures (with
+    ``truth`` as their ground truth) and accept them (one transaction per video); the conditions they show
+    (:func:`condition_ranges`)."""
     values: dict[str, list[float]] = {"mirror_fooling_px": [], "aligned_mono_epe_px": []}
     for seed in seeds:
-        video = capture_video(seed, frames)
+        video = capture_video(seed, frames, truth=truth)
         with transaction(rt.sessions) as s:
             curator = s.scalar(select(User).where(User.name == "bench-curator"))
             for sample_id in import_rendered_video(s, rt.media, video):

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks import fusion, provenance
-from benchmarks.trunk import STEREO_ONLY_TRUNK_FILE, TRUNK_FILE, save_trunk
+from benchmarks.trunk import save_trunk, trunk_file
 from dataset.synthetic.io import FORMAT as SYNTHETIC_FORMAT
 from dataset.tables import TrainingRun
 from dataset.version import code_version
@@ -58,29 +58,29 @@ def pretrain_overrides(steps: int, stereo_only: bool = False) -> dict[str, Any]:
 
 
 def run_pretrain(work_dir: Path, *, videos: int = PRETRAIN_VIDEOS, frames: int = PRETRAIN_FRAMES,
-                 steps: int = PRETRAIN_STEPS, stereo_only: bool = False) -> dict[str, Any]:
+                 steps: int = PRETRAIN_STEPS, stereo_only: bool = False, truth: fusion.Truth = "surface") -> dict[str, Any]:
     """Prepare (or reuse) the pre-training data under ``work_dir/pretrain``, train on it for ``steps``
-    steps and write the trunk of the run's best checkpoint to ``work_dir/TRUNK_FILE`` (with
-    ``stereo_only``, the stereo-only network's, to ``work_dir/STEREO_ONLY_TRUNK_FILE``). Returns the
-    trunk's record (file, sha256, recipe), the conditions of the pre-training data beside the test
-    pairs', and the timings (seconds)."""
+    steps and write the trunk of the run's best checkpoint to ``work_dir/``:func:`trunk_file` (with
+    ``stereo_only``, the stereo-only network's; with ``truth`` "matcher", trained on what a matcher finds,
+    reflections and all — in a workspace of its own). Returns the trunk's record (file, sha256, recipe),
+    the conditions of the pre-training data beside the test pairs', and the timings (seconds)."""
     started = time.perf_counter()
     # Taken before training, so that the record names the code the run started from.
     source_commit, sources = provenance.source_commit(), provenance.training_sources_fingerprint()
     seeds = pretrain_seeds(videos)
     data = {"protocol": fusion.PROTOCOL, "seeds": [seeds[0], seeds[-1]], "frames": frames, "size": fusion.SIZE,
             "capture_baselines_m": fusion.TRAIN_BASELINE_M, "synthetic": SYNTHETIC_FORMAT,
-            "families": fusion.SCENE_FAMILIES}
-    home = work_dir / "pretrain" / "workspace"
+            "families": fusion.SCENE_FAMILIES, "truth": truth}
+    home = work_dir / "pretrain" / ("workspace" if truth == "surface" else f"workspace-{truth}")
     rt, conditions = fusion.bench_workspace(home, data)
     cached = conditions is not None
     if conditions is None:
-        captures = fusion.import_captures(rt, seeds, frames)
+        captures = fusion.import_captures(rt, seeds, frames, truth)
         # Hashed from the same renders the import made (rendering is deterministic), once per prepared
         # workspace: a reused workspace keeps the hash of what it imported.
-        conditions = fusion.finish_workspace(home, data, {"captures": captures,
-                                                          "data_sha256": provenance.pretrain_data_digest(seeds, frames)})
-    data_sha256 = conditions.get("data_sha256") or provenance.pretrain_data_digest(seeds, frames)
+        digest = provenance.pretrain_data_digest(seeds, frames, truth=truth)
+        conditions = fusion.finish_workspace(home, data, {"captures": captures, "data_sha256": digest})
+    data_sha256 = conditions.get("data_sha256") or provenance.pretrain_data_digest(seeds, frames, truth=truth)
     prepare_s = time.perf_counter() - started
     try:
         run_id = fusion.launch_run(rt, PRETRAIN_SEED, pretrain_overrides(steps, stereo_only), split=PRETRAIN_SPLIT)
@@ -94,16 +94,16 @@ def run_pretrain(work_dir: Path, *, videos: int = PRETRAIN_VIDEOS, frames: int =
     recipe = {"preset": "lite", "overrides": overrides, "seed": PRETRAIN_SEED, "split": PRETRAIN_SPLIT,
               "data": data, "run": run_id, "best_step": best_step, "code_version": code_version(),
               "command": f"illusion-studio bench pretrain --videos {videos} --frames {frames} --steps {steps}"
-                         + (" --stereo-only" if stereo_only else ""),
+                         + (" --stereo-only" if stereo_only else "") + (f" --truth {truth}" if truth != "surface" else ""),
               # The command alone does not rebuild the trunk once the preset's defaults move on.
               "resolved_config": provenance.resolved_config("lite", overrides),
               "data_sha256": data_sha256,
               "provenance": {"commit": source_commit, "sources": sources}}
-    trunk_file = STEREO_ONLY_TRUNK_FILE if stereo_only else TRUNK_FILE
-    record = save_trunk(checkpoint, work_dir / trunk_file, recipe)
+    trunk = trunk_file(stereo_only, truth)
+    record = save_trunk(checkpoint, work_dir / trunk, recipe)
     timed = time.perf_counter()
     held_out = fusion.condition_ranges(fusion.condition_values(fusion.held_out_samples(fusion.TEST_SEEDS)))
-    return {"trunk": {**record, "file": str(trunk_file)},
+    return {"trunk": {**record, "file": str(trunk)},
             "conditions": {"training": conditions, "held_out": held_out}, "prepare_cached": cached,
             "timings_s": {"prepare": round(prepare_s, 1), "train": round(train_s, 1),
                           "render_pairs": round(time.perf_counter() - timed, 1),

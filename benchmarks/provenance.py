@@ -112,9 +112,10 @@ def config_differences(a: Mapping[str, Any], b: Mapping[str, Any]) -> dict[str, 
             if a[section].get(field) != b[section].get(field)}
 
 
-def pretrain_data_digest(seeds: Iterable[int], frames: int, families: bool | None = None) -> str:
+def pretrain_data_digest(seeds: Iterable[int], frames: int, families: bool | None = None,
+                         truth: str = "surface") -> str:
     """sha256 of the pre-training captures as ``bench pretrain`` imports them (``fusion.capture_video``,
-    of the scene ``families`` or not; default: the benchmark's SCENE_FAMILIES): each seed's ``frames``
+    of the scene ``families`` or not, default the benchmark's SCENE_FAMILIES; with ``truth``): each seed's ``frames``
     frames rendered at the benchmark's SIZE and that seed's capture baseline, hashed as
     ``fusion.pairs_digest`` hashes pairs (per frame, in seed then frame order: its name, left and right
     images, disparity and the realistic mono disparity the capture stores)."""
@@ -122,7 +123,8 @@ def pretrain_data_digest(seeds: Iterable[int], frames: int, families: bool | Non
 
     def samples() -> Iterable[Any]:
         for seed in seeds:
-            video = fusion.capture_video(seed, frames, fusion.SCENE_FAMILIES if families is None else families)
+            video = fusion.capture_video(seed, frames, fusion.SCENE_FAMILIES if families is None else families,
+                                         truth)  # type: ignore[arg-type]
             yield from fusion.video_samples(video)
 
     return fusion.pairs_digest(samples())

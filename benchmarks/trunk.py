@@ -35,6 +35,13 @@ TRUNK_FILE = Path("pretrain") / "trunk.safetensors"  # under the benchmark's wor
 STEREO_ONLY_TRUNK_FILE = Path("pretrain") / "trunk-stereo-only.safetensors"
 
 
+def trunk_file(stereo_only: bool = False, truth: str = "surface") -> Path:
+    """Where ``bench pretrain`` writes a trunk under the work dir: TRUNK_FILE, STEREO_ONLY_TRUNK_FILE, or
+    either with ``-matcher`` before the suffix when pre-trained on the matcher's truth."""
+    path = STEREO_ONLY_TRUNK_FILE if stereo_only else TRUNK_FILE
+    return path if truth == "surface" else path.with_name(f"{path.stem}-{truth}{path.suffix}")
+
+
 @dataclass(frozen=True)
 class Trunk:
     """A loaded trunk: its tensors by name, the file's sha256, the recipe that made it, the file's name."""

@@ -17,6 +17,7 @@ torch = pytest.importorskip("torch")
 
 from benchmarks import fusion, pretrain  # noqa: E402
 from benchmarks.trunk import TRUNK_PREFIXES, compose_init, load_trunk, save_trunk  # noqa: E402
+from benchmarks.trunk import trunk_file as trunk_path  # noqa: E402
 from dataset.services import training  # noqa: E402
 from dataset.synthetic import render_video  # noqa: E402
 from dataset.synthetic.corruptions import warped_mono  # noqa: E402
@@ -309,15 +310,30 @@ def test_cli_pretrain_passes_its_options_and_prints_the_conditions(tmp_path: Pat
     out = CliRunner().invoke(main, ["bench", "pretrain", "--work-dir", str(tmp_path), "--videos", "3", "--frames", "2",
                                     "--steps", "40"])
     assert out.exit_code == 0, out.output
-    assert calls == [{"work_dir": tmp_path.absolute(), "videos": 3, "frames": 2, "steps": 40, "stereo_only": False}]
+    assert calls == [{"work_dir": tmp_path.absolute(), "videos": 3, "frames": 2, "steps": 40, "stereo_only": False,
+                      "truth": "surface"}]
     assert "4 frames: 5.50 / 9.00 / 20.25" in out.output and "pre-training captures" in out.output
     assert "test pairs" in out.output and "ab" * 32 in out.output
     out = CliRunner().invoke(main, ["bench", "pretrain", "--json", "--work-dir", str(tmp_path)])
     assert out.exit_code == 0 and json.loads(out.output) == result
     assert calls[-1] == {"work_dir": tmp_path.absolute(), "videos": pretrain.PRETRAIN_VIDEOS,
-                         "frames": pretrain.PRETRAIN_FRAMES, "steps": pretrain.PRETRAIN_STEPS, "stereo_only": False}
-    out = CliRunner().invoke(main, ["bench", "pretrain", "--json", "--stereo-only", "--work-dir", str(tmp_path)])
-    assert out.exit_code == 0 and calls[-1]["stereo_only"] is True
+                         "frames": pretrain.PRETRAIN_FRAMES, "steps": pretrain.PRETRAIN_STEPS, "stereo_only": False,
+                         "truth": "surface"}
+    out = CliRunner().invoke(main, ["bench", "pretrain", "--json", "--stereo-only", "--truth", "matcher",
+                                    "--work-dir", str(tmp_path)])
+    assert out.exit_code == 0 and calls[-1]["stereo_only"] is True and calls[-1]["truth"] == "matcher"
+
+
+def test_the_matchers_truth_is_the_reflection_inside_mirrors_and_the_surface_elsewhere() -> None:
+    seed = fusion.RENDERED_SEEDS[0]
+    surface, matcher = fusion.capture_video(seed, 1), fusion.capture_video(seed, 1, truth="matcher")
+    (glass, seen), frame = (surface.frames[0].disparity, matcher.frames[0].disparity), surface.frames[0]
+    mirror = np.any([pair.illusion for pair in frame.regions if pair.illusion_type == "mirror"], axis=0)
+    assert np.array_equal(seen, frame.stereo_disparity) and np.array_equal(seen[~mirror], glass[~mirror])
+    assert np.mean(glass[mirror] - seen[mirror]) > 1  # the reflection lies behind the glass
+    assert np.array_equal(matcher.frames[0].left, frame.left)  # the same images: only the truth differs
+    assert trunk_path(True, "matcher") == Path("pretrain/trunk-stereo-only-matcher.safetensors")
+    assert trunk_path(False, "surface") == Path("pretrain/trunk.safetensors")
 
 
 def _intervals() -> dict[str, Any]:

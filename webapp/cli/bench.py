@@ -277,15 +277,19 @@ def fusion_benchmark(as_json: bool, seeds: int, steps: int | None, work_dir: Pat
 @click.option("--stereo-only", is_flag=True,
               help="Pre-train the stereo-only network (never reads the mono input) instead; its trunk goes to "
                    "WORK_DIR/pretrain/trunk-stereo-only.safetensors.")
+@click.option("--truth", type=click.Choice(["surface", "matcher"]), default="surface", show_default=True,
+              help="The pre-training data's ground truth: the surface (a mirror's glass), or what a stereo matcher "
+                   "finds (a mirror's reflection), as data that never teaches where glass is (the paper's SceneFlow); "
+                   "its trunk's name ends in -matcher.")
 def pretrain_benchmark(as_json: bool, work_dir: Path, videos: int | None, frames: int | None, steps: int | None,
-                       stereo_only: bool) -> None:
+                       stereo_only: bool, truth: str) -> None:
     """Pre-train lite's trunk (mono context encoder and stereo branch) on many rendered scenes with exact
     disparity, never the benchmark's seeds, through the product's training job; `bench fusion` then
     fine-tunes every network from it."""
     from benchmarks.pretrain import PRETRAIN_FRAMES, PRETRAIN_STEPS, PRETRAIN_VIDEOS, run_pretrain
 
     results = run_pretrain(work_dir.absolute(), videos=videos or PRETRAIN_VIDEOS, frames=frames or PRETRAIN_FRAMES,
-                           steps=steps or PRETRAIN_STEPS, stereo_only=stereo_only)
+                           steps=steps or PRETRAIN_STEPS, stereo_only=stereo_only, truth=truth)  # type: ignore[arg-type]
     if as_json:
         click.echo(json.dumps(results))
         return
