@@ -64,7 +64,7 @@ from dataset.capture.synthetic import import_rendered_video
 from dataset.db import transaction
 from dataset.media import MediaStore
 from dataset.readers import StereoSample
-from dataset.readers.base import make_regions
+from dataset.readers.synthetic import frame_sample
 from dataset.readers.version import VersionReader, pin_dataset_version
 from dataset.samples import load_output, mask_name, store_outputs
 from dataset.services import jobs as job_service
@@ -290,18 +290,12 @@ def video_samples(video: SyntheticVideo, mono: str = "realistic") -> list[Stereo
     and ``mirror_fooling_px`` (frames with mirror pixels)."""
     samples = []
     for frame in video.frames:
-        masks = {pair.illusion_type: pair.illusion for pair in frame.regions}
-        illusion = np.logical_or.reduce(list(masks.values()))
-        mirror = masks.get("mirror", np.zeros(illusion.shape, bool))
-        # How far a matcher that finds the reflection is from the glass: what a mirror does to stereo.
-        fooling = {"mirror_fooling_px": float(np.mean(np.abs(frame.stereo_disparity[mirror] - frame.disparity[mirror])))
-                   } if mirror.any() else {}
-        samples.append(StereoSample(
-            name=f"{video.name}/{frame.index:04d}", left=frame.left, right=frame.right,
-            disparity=frame.disparity,
-            regions=make_regions(frame.disparity, {"illusion": illusion, **masks, "non_illusion": ~illusion}),
-            mono=frame.mono_disparity if mono == "realistic" else warped_mono(frame.mono_ideal, video.seed, frame.index),
-            meta={"seed": video.seed, **fooling}))
+        sample = frame_sample(video.name, video.seed, frame, mono=None if mono == "realistic"
+                              else warped_mono(frame.mono_ideal, video.seed, frame.index))
+        mirror = sample.regions.get("mirror", np.zeros(frame.disparity.shape, bool))
+        if mirror.any():  # how far a matcher that finds the reflection is from the glass: what a mirror does to stereo
+            sample.meta["mirror_fooling_px"] = float(np.mean(np.abs(frame.stereo_disparity[mirror] - frame.disparity[mirror])))
+        samples.append(sample)
     return samples
 
 

@@ -42,7 +42,7 @@ def check_sample(sample: StereoSample) -> None:
 
 
 def test_formats_are_the_contracts() -> None:
-    assert READER_FORMATS == ("native", "authors", "booster", "middlebury", "kitti", "sceneflow")
+    assert READER_FORMATS == ("native", "authors", "booster", "middlebury", "kitti", "sceneflow", "synthetic")
 
 
 # --- authors ----------------------------------------------------------------------------------

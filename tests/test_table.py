@@ -105,3 +105,21 @@ def test_the_table_scores_every_imported_network_once_beside_sgbm(tmp_path: Path
     lines = text.stdout.splitlines()  # the table alone: the jobs' progress goes to stderr
     assert lines[0] == "region: all" and lines[1].split()[:3] == ["Method", "Checkpoint", "EPE"]
     assert [line.split()[:2] for line in lines[4:6]] == [["RAFT-Stereo", "imported:rt-a"], ["RAFT-Stereo", "imported:rt-b"]]
+
+
+def test_synth_writes_the_benchmarks_held_out_scenes_and_the_synthetic_reader_reads_them_back(tmp_path: Path) -> None:
+    from benchmarks import fusion
+    from dataset.readers import open_reader
+
+    seeds = fusion.TEST_SEEDS[:2]
+    result = CliRunner().invoke(main, ["synth", str(tmp_path / "test"), "--videos", "2", "--seed", str(seeds[0]),
+                                       "--frames", str(fusion.HELD_OUT_FRAMES), "--size", "x".join(map(str, fusion.SIZE)),
+                                       "--families", "--baseline-m", str(fusion.HELD_OUT_BASELINE_M)])
+    assert result.exit_code == 0, result.output
+    reader = open_reader("synthetic", tmp_path / "test")
+    samples = [reader[i] for i in range(len(reader))]
+    # bit for bit the pairs `bench fusion` scores: images, truth, mono and names
+    assert fusion.pairs_digest(samples) == fusion.pairs_digest(fusion.held_out_samples(seeds))
+    assert {"all", "illusion", "picture", "mirror", "non_illusion"} <= set(samples[0].regions)
+    assert samples[0].camera is not None and samples[0].camera.baseline == fusion.HELD_OUT_BASELINE_M
+    assert samples[0].meta["left"] == "synthetic-families-1000/frames/000000/left.png"

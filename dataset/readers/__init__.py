@@ -1,6 +1,6 @@
 """Torch-free readers of stereo datasets, all yielding :class:`StereoSample` (pixels, NaN = invalid,
 region masks): the native export, the authors' released test set, Booster, Middlebury, KITTI 2015
-and SceneFlow; pinned dataset versions of the database are read by ``version.VersionReader``.
+SceneFlow and `synth`'s rendered scenes; pinned dataset versions of the database are read by ``version.VersionReader``.
 
 ``open_reader(fmt, root, **options)`` lists a dataset's samples at once and reads each only when
 indexed; a folder that is not that layout is a :class:`LayoutError` saying what was expected, a
@@ -21,10 +21,11 @@ from dataset.readers.kitti import KittiReader
 from dataset.readers.middlebury import MiddleburyReader
 from dataset.readers.native import NativeReader
 from dataset.readers.sceneflow import SceneFlowReader
+from dataset.readers.synthetic import SyntheticReader
 
 READERS: dict[str, type[ListedReader]] = {
     "native": NativeReader, "authors": AuthorsReader, "booster": BoosterReader,
-    "middlebury": MiddleburyReader, "kitti": KittiReader, "sceneflow": SceneFlowReader,
+    "middlebury": MiddleburyReader, "kitti": KittiReader, "sceneflow": SceneFlowReader, "synthetic": SyntheticReader,
 }
 READER_FORMATS = tuple(READERS)
 

@@ -15,12 +15,14 @@ import json
 import os
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
 
 from core.atomic import atomic_write_bytes
 from dataset.synthetic.defects import DEFECT_FRAMES, spoil_last_frames
+from dataset.synthetic.layout import BASELINE_M
 from dataset.synthetic.mono import FrameAffine, MonoModel
 from dataset.synthetic.records import RegionPair, SyntheticFrame, SyntheticVideo
 from dataset.synthetic.render import render_video
@@ -134,27 +136,34 @@ def _read_png(path: Path, flags: int) -> np.ndarray:
     return image
 
 
+def read_scene(video_dir: Path) -> dict[str, Any]:
+    """A folder's ``scene.json`` (intrinsics, baseline, pairs, frames…); ValueError if it is not a FORMAT scene."""
+    path = Path(video_dir) / "scene.json"
+    scene = json.loads(path.read_text())
+    if not isinstance(scene, dict) or scene.get("format") != FORMAT:
+        raise ValueError(f"{path}: not a {FORMAT} scene")
+    return scene
+
+
+def read_frame(video_dir: Path, scene: dict[str, Any], entry: dict[str, Any]) -> SyntheticFrame:
+    """The frame ``entry`` (one of ``scene["frames"]``) of the folder :func:`write_video` wrote."""
+    folder = Path(video_dir) / "frames" / f"{entry['index']:06d}"
+    images = {name: cv2.cvtColor(_read_png(folder / f"{name}.png", cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+              for name in ("left", "right")}
+    maps = {name: np.load(folder / f"{name}.npy", allow_pickle=False) for name in _MAPS}
+    regions = []
+    for pair in scene["pairs"]:
+        masks = {name: _read_png(folder / f"{name}_{pair['pair']:02d}.png", cv2.IMREAD_GRAYSCALE) > 127
+                 for name in ("illusion", "support")}
+        regions.append(RegionPair(pair["pair"], pair["kind"], pair["illusion_type"], **masks))
+    return SyntheticFrame(index=entry["index"], time_s=entry["time_s"], **images, **maps, regions=regions,
+                          mono_affine=FrameAffine(entry["mono_scale"], entry["mono_shift"]))
+
+
 def read_video(video_dir: Path) -> SyntheticVideo:
     """Read a folder written by :func:`write_video` (everything but the lossy video.mp4)."""
-    root = Path(video_dir)
-    scene = json.loads((root / "scene.json").read_text())
-    if scene.get("format") != FORMAT:
-        raise ValueError(f"{root / 'scene.json'}: not a {FORMAT} scene")
-    frames = []
-    for entry in scene["frames"]:
-        folder = root / "frames" / f"{entry['index']:06d}"
-        images = {name: cv2.cvtColor(_read_png(folder / f"{name}.png", cv2.IMREAD_COLOR),
-                                     cv2.COLOR_BGR2RGB) for name in ("left", "right")}
-        maps = {name: np.load(folder / f"{name}.npy", allow_pickle=False) for name in _MAPS}
-        regions = []
-        for pair in scene["pairs"]:
-            masks = {name: _read_png(folder / f"{name}_{pair['pair']:02d}.png",
-                                     cv2.IMREAD_GRAYSCALE) > 127
-                     for name in ("illusion", "support")}
-            regions.append(RegionPair(pair["pair"], pair["kind"], pair["illusion_type"], **masks))
-        frames.append(SyntheticFrame(index=entry["index"], time_s=entry["time_s"], **images,
-                                     **maps, regions=regions,
-                                     mono_affine=FrameAffine(entry["mono_scale"], entry["mono_shift"])))
+    scene = read_scene(video_dir)
+    frames = [read_frame(video_dir, scene, entry) for entry in scene["frames"]]
     k = scene["intrinsics"]
     return SyntheticVideo(name=scene["name"], seed=scene["seed"], fps=scene["fps"], fx=k["fx"],
                           fy=k["fy"], cx=k["cx"], cy=k["cy"], baseline_m=scene["baseline_m"],
@@ -164,14 +173,14 @@ def read_video(video_dir: Path) -> SyntheticVideo:
 
 def write_synthetic_dataset(out_dir: Path, videos: int = 3, seed: int = 0, n_frames: int = 12,
                             width: int = 640, height: int = 360, *, defects: bool = False,
-                            families: bool = False) -> list[Path]:
+                            families: bool = False, baseline_m: float = BASELINE_M) -> list[Path]:
     """Render and write ``videos`` videos (video k from seed ``seed + k``, with the scene ``families``
     or not); their folders. ``defects``: add DEFECT_FRAMES spoilt frames (a caption, a blur) to each
     video's ``n_frames`` clean ones, for the prefilter to catch."""
     paths = []
     for k in range(videos):
         video, spoilt = render_video(seed + k, n_frames + (DEFECT_FRAMES if defects else 0), width, height,
-                                     families=families), {}
+                                     baseline_m, families=families), {}
         if defects:
             video, spoilt = spoil_last_frames(video)
         paths.append(write_video(video, out_dir, spoilt))

@@ -110,6 +110,9 @@ def _finite(value: Any) -> bool:
 
 
 def _number(value: Any) -> str:
+    """3 decimals below 10, 2 above; ``inf`` where a mean met an infinite depth (a zero disparity), ``–`` unmeasured."""
+    if isinstance(value, (int, float)) and math.isinf(value):
+        return "inf"
     return f"{value:.3f}" if _finite(value) and abs(value) < 10 else f"{value:.2f}" if _finite(value) else "–"
 
 

@@ -87,7 +87,11 @@ def server_url(server: Server) -> str:
 @click.option("--seed", default=0, show_default=True, type=int)
 @click.option("--frames", "n_frames", default=12, show_default=True, type=click.IntRange(1, 10_000))
 @click.option("--size", default="640x360", show_default=True, help="WIDTHxHEIGHT in pixels.")
-def synth(out_dir: Path, videos: int, seed: int, n_frames: int, size: str) -> None:
+@click.option("--families", is_flag=True, help="The scene families of the fusion benchmark: frames of one distribution "
+                                                "for every kind, large and wall-sized mirrors, weak walls, mixed estimators.")
+@click.option("--baseline-m", type=click.FloatRange(0.01, 5.0), default=None,
+              help="Stereo baseline in metres (default 0.1; the fusion benchmark's held-out scenes: 0.63).")
+def synth(out_dir: Path, videos: int, seed: int, n_frames: int, size: str, families: bool, baseline_m: float | None) -> None:
     """Render synthetic illusion videos (picture + mirror, with exact ground truth) into OUT_DIR."""
     from dataset.synthetic import write_synthetic_dataset
 
@@ -95,8 +99,9 @@ def synth(out_dir: Path, videos: int, seed: int, n_frames: int, size: str) -> No
     with click.progressbar(length=videos, label="rendering", file=sys.stderr) as bar:
         paths = []
         for k in range(videos):
-            paths += write_synthetic_dataset(out_dir, videos=1, seed=seed + k, n_frames=n_frames,
-                                             width=width, height=height)
+            paths += write_synthetic_dataset(out_dir, videos=1, seed=seed + k, n_frames=n_frames, width=width,
+                                             height=height, families=families,
+                                             **({"baseline_m": baseline_m} if baseline_m is not None else {}))
             bar.update(1)
     for path in paths:
         click.echo(str(path))
