@@ -3,8 +3,9 @@
 RAFT-Stereo's widths are fixed (hidden 128, features 256, …), so its golden fixtures
 (tests/fixtures/raft_stereo/) store a key/shape list and a seed rather than megabytes of weights;
 :func:`raft_state` turns them back into the state dict the fixtures' reference outputs were computed
-with. Scales keep 32 GRU iterations finite and tame: convolutions kaiming-like (std √(1/fan-in)),
-the flow head's output smaller, small biases, batch-norm affines near 1/0 and running statistics near 0/1. RAFT-Stereo's
+with. Scales keep 32 GRU iterations finite: convolutions kaiming-like (std √(1/fan-in)), small biases,
+the flow head's output smaller (HEAD_GAIN: disparities of a few px) or larger (``head_gain``, the wide
+fixtures': hundreds of px), batch norm near identity or far from it (``far_statistics``). RAFT-Stereo's
 ``norm3`` is the same module as ``downsample.1`` in its residual blocks, so the two share values.
 
 Only torch is needed: the project holds none of RAFT-Stereo's code.
