@@ -121,7 +121,7 @@ def test_the_wide_fixtures_reach_past_100_px_both_ways_with_batch_norm_far_from_
 def test_a_float16_file_imports_and_predicts_what_raft_stereo_does_for_its_weights(home: Path, tmp_path: Path) -> None:
     """A half-precision copy of a published file (as some labs keep them) imports as float32 weights of the
     same values and predicts what the reference gives for the float16-rounded weights. Rounding alone moves
-    the reference's output by up to ``half_vs_float_px`` (≈ 1 px at 200 px after 32 iterations): that, not
+    the reference's output by up to ``half_vs_float_px`` (0.63 px, disparities to 316 px, 32 iterations): that, not
     the comparison's tolerance, is how far a float16 file lies from its float32 original."""
     fixture = load_fixture("default_wide")
     state = fixture_state(fixture)
