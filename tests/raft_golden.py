@@ -3,8 +3,9 @@
 RAFT-Stereo's widths are fixed (hidden 128, features 256, …), so its golden fixtures
 (tests/fixtures/raft_stereo/) store a key/shape list and a seed rather than megabytes of weights;
 :func:`raft_state` turns them back into the state dict the fixtures' reference outputs were computed
-with. Scales keep 32 GRU iterations finite and tame: convolutions kaiming-like (std √(1/fan-in)),
-the flow head's output smaller, small biases, batch-norm affines near 1/0 and running statistics near 0/1. RAFT-Stereo's
+with. Scales keep 32 GRU iterations finite: convolutions kaiming-like (std √(1/fan-in)), small biases,
+the flow head's output smaller (HEAD_GAIN: disparities of a few px) or larger (``head_gain``, the wide
+fixtures': hundreds of px), batch norm near identity or far from it (``far_statistics``). RAFT-Stereo's
 ``norm3`` is the same module as ``downsample.1`` in its residual blocks, so the two share values.
 
 Only torch is needed: the project holds none of RAFT-Stereo's code.
@@ -31,9 +32,10 @@ def _canonical(name: str) -> str:
 
 
 def raft_state(keys: Sequence[tuple[str, Sequence[int]]], seed: int, *, head: str = ".flow_head.conv2.",
-               far_statistics: bool = False) -> dict[str, torch.Tensor]:
+               head_gain: float = HEAD_GAIN, far_statistics: bool = False) -> dict[str, torch.Tensor]:
     """The state dict for ``keys`` ((name, shape) in file order) and ``seed``; ``head``: the key part of
-    the layer scaled by HEAD_GAIN (Selective-RAFT's ``.disp_head.conv2.``); ``far_statistics``: batch
+    the layer scaled by ``head_gain`` (Selective-RAFT's ``.disp_head.conv2.``; a larger gain, larger GRU updates:
+    disparities of hundreds of pixels); ``far_statistics``: batch
     norm far from identity (running means ~N(0, 0.5²), variances log-uniform in [1/4, 4], scales
     ~N(1, 0.3²), shifts ~N(0, 0.2²)), so that a network that skipped or misread them would show."""
     generator = torch.Generator().manual_seed(seed)
@@ -56,7 +58,7 @@ def raft_state(keys: Sequence[tuple[str, Sequence[int]]], seed: int, *, head: st
                          else 1.0 + 0.2 * torch.rand(tuple(shape), generator=generator))
             elif len(shape) == 4:
                 fan_in = shape[1] * shape[2] * shape[3]
-                gain = HEAD_GAIN if head in canonical else 1.0
+                gain = head_gain if head in canonical else 1.0
                 value = normal(shape, gain * (1.0 / fan_in) ** 0.5)
             elif leaf == "weight":  # a norm's affine scale
                 value = normal(shape, 0.3 if far_statistics else 0.1, 1.0)
@@ -78,7 +80,7 @@ def load_fixture(name: str, directory: Path = FIXTURES) -> dict[str, Any]:
     with np.load(directory / f"{name}.npz") as arrays:
         fixture.update({key: arrays[key] for key in arrays.files})
     if fixture.get("pair") == "motorcycle":
-        fixture["left"], fixture["right"] = motorcycle_pair(fixture["stride"])
+        fixture["left"], fixture["right"] = motorcycle_pair(fixture["stride"], fixture.get("rows"))
     return fixture
 
 
@@ -87,11 +89,14 @@ def fixture_state(fixture: dict[str, Any]) -> dict[str, torch.Tensor]:
     return raft_state([(key, shape) for key, shape in fixture["keys"]], fixture["seed"], **fixture.get("weights", {}))
 
 
-def motorcycle_pair(stride: int) -> tuple[np.ndarray, np.ndarray]:
+def motorcycle_pair(stride: int, rows: Sequence[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """scikit-image's Middlebury 2014 Motorcycle pair (741×500, shipped in its wheel: no download), every
     ``stride``-th pixel (plain slicing, no resampling library's rounding): a real pair, uint8 H×W×3.
-    Stride 3 gives 167×247, sides that are not multiples of 32."""
+    Stride 3 gives 167×247, sides that are not multiples of 32; ``rows`` (first, count) keeps only those
+    rows: a strip as wide as the pair at a fraction of its cost."""
     import skimage.data
 
     left, right, _ = skimage.data.stereo_motorcycle()
-    return (np.ascontiguousarray(left[::stride, ::stride, :3]), np.ascontiguousarray(right[::stride, ::stride, :3]))
+    first, count = rows if rows is not None else (0, left.shape[0])
+    return (np.ascontiguousarray(left[::stride, ::stride, :3][first:first + count]),
+            np.ascontiguousarray(right[::stride, ::stride, :3][first:first + count]))
