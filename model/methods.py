@@ -1,9 +1,10 @@
 """The methods an evaluation compares, each a disparity predictor over :class:`StereoSample`s.
 
 ``fusion``, ``stereo`` and ``mono_align`` share one forward pass of a fusion checkpoint per
-sample; ``raft_stereo`` and ``selective_raft`` are stereo-only networks' disparities (RAFT-Stereo's,
-Selective-RAFT's, e.g. imported published checkpoints: :data:`BASELINE_METHODS`); each network method
-may have a checkpoint of its own, and methods that share one share its forward pass. ``mono_gt_align``
+sample; ``raft_stereo``, ``selective_raft`` and ``selective_igev`` are stereo-only networks'
+disparities (RAFT-Stereo's, Selective-RAFT's, Selective-IGEV's, e.g. imported published checkpoints:
+:data:`BASELINE_METHODS`); each network method may have a checkpoint of its own, and methods that
+share one share its forward pass. ``mono_gt_align``
 and ``sgbm`` need no network (torch loads only when a network method is asked for); ``predictions``
 reads another program's PFMs.
 """
@@ -36,7 +37,8 @@ class Baseline(NamedTuple):
 # Each scores its own checkpoint's disparity.
 BASELINE_METHODS: dict[str, Baseline] = {
     "raft_stereo": Baseline("raft-stereo", "RAFT-Stereo", "imported:raftstereo-sceneflow"),
-    "selective_raft": Baseline("selective-raft", "Selective-RAFT", "imported:sceneflow")}
+    "selective_raft": Baseline("selective-raft", "Selective-RAFT", "imported:sceneflow"),
+    "selective_igev": Baseline("selective-igev", "Selective-IGEV", "imported:selective-igev-sceneflow")}
 METHODS = ("fusion", "stereo", "mono_align", *BASELINE_METHODS, "mono_gt_align", "sgbm", "predictions")
 NETWORK_METHODS = ("fusion", "stereo", "mono_align", *BASELINE_METHODS)
 FUSION_METHODS = ("fusion", "stereo", "mono_align")  # read from one fusion checkpoint's forward pass
