@@ -2,7 +2,9 @@
 IGEV-Stereo whose GRUs are Selective Recurrent Units — per level a 1×1-kernel and a 3×3-kernel GRU
 blended by a spatial attention map from the context (the "contextual spatial attention"), the context
 itself scaled by a channel attention. Inference as its demo runs it (test mode: only the last iterate
-is upsampled), float32.
+is upsampled), float32: :func:`predict_disparity` alone, or as the stereo branch of a
+``model.architecture = "selective-igev"`` network (:class:`SelectiveIgevBranch`), which `predict` and
+`evaluate` run with the same padding.
 
 Layout and names are the published checkpoints' (``module.`` stripped) except where a module is the
 project's own: the context encoder (RAFT-Stereo's MultiBasicEncoder, :class:`ContextEncoder`) and the
