@@ -27,18 +27,21 @@ from model.align import AlignRule, align
 
 class Baseline(NamedTuple):
     """A baseline network's method: the model.architecture its checkpoint must have, the network's
-    name, and the checkpoint a message gives as an example."""
+    name, the checkpoint a message gives as an example, and what `checkpoints import --from
+    ARCHITECTURE` needs besides the file for its published files (shown where none is imported yet)."""
 
     architecture: str
     title: str
     example: str
+    import_flags: str = ""
 
 
 # Each scores its own checkpoint's disparity.
 BASELINE_METHODS: dict[str, Baseline] = {
     "raft_stereo": Baseline("raft-stereo", "RAFT-Stereo", "imported:raftstereo-sceneflow"),
     "selective_raft": Baseline("selective-raft", "Selective-RAFT", "imported:sceneflow"),
-    "selective_igev": Baseline("selective-igev", "Selective-IGEV", "imported:selective-igev-sceneflow")}
+    "selective_igev": Baseline("selective-igev", "Selective-IGEV", "imported:selective-igev-sceneflow",
+                               "--max-disp 192")}  # no tensor holds it: 768 for middlebury_finetune
 METHODS = ("fusion", "stereo", "mono_align", *BASELINE_METHODS, "mono_gt_align", "sgbm", "predictions")
 NETWORK_METHODS = ("fusion", "stereo", "mono_align", *BASELINE_METHODS)
 FUSION_METHODS = ("fusion", "stereo", "mono_align")  # read from one fusion checkpoint's forward pass

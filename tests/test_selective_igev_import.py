@@ -246,3 +246,12 @@ def test_the_preset_is_import_only_and_pads_as_the_demo() -> None:
 def test_bench_model_offers_to_skip_selective_igev() -> None:
     result = CliRunner().invoke(main, ["bench", "model", "--help"])
     assert result.exit_code == 0 and "--no-selective-igev" in result.output
+
+
+def test_the_evaluation_page_offers_a_selective_igev_checkpoint_and_says_how_to_import_one(client, tokens) -> None:  # type: ignore[no-untyped-def]
+    from tests.conftest import login
+
+    login(client, "curator")
+    html = client.get("/evaluations").get_data(as_text=True)
+    assert 'name="selective_igev_checkpoint" data-baseline="selective_igev"' in html
+    assert "checkpoints import --from selective-igev FILE --max-disp 192</code>" in html  # none imported yet
