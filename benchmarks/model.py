@@ -1,8 +1,8 @@
 """The fusion model's budget: the ``lite`` preset on one 1920×1080 pair, timed in a
 process of its own (peak resident memory: that child's own VmHWM), beside OpenCV SGBM
-on the same pair in the same run and the baselines' own networks (RAFT-Stereo's ``raft-stereo`` and
-Selective-RAFT's ``selective-raft`` presets at their published sizes and 32 test iterations, what an
-imported checkpoint runs: :data:`BASELINES`); parameters per module;
+on the same pair in the same run and the baselines' own networks (RAFT-Stereo's ``raft-stereo``,
+Selective-RAFT's ``selective-raft`` and Selective-IGEV's ``selective-igev`` presets at their published
+sizes and 32 test iterations, what an imported checkpoint runs: :data:`BASELINES`); parameters per module;
 training steps/s at the lite crop. The lite VLM's EfficientNet-Lite0 eye (``vlm_eye``, lite's
 default): lite on the same pair with its VLM's patches instead, the eye's own stride-16 features at
 the size lite's VLM sees, and its parameters.
@@ -17,6 +17,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Collection
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -37,7 +38,7 @@ EYE = {"vlm_eye": "efficientnet-lite0", "vlm_eye_weights": "random"}
 # lite's VLM before it had an eye: image tokens from patches it learns itself
 PATCHES = {"vlm_eye": "patches"}
 # The baselines timed beside lite, by their keys in the JSON: the preset each runs.
-BASELINES = {"raft_stereo": "raft-stereo", "selective_raft": "selective-raft"}
+BASELINES = {"raft_stereo": "raft-stereo", "selective_raft": "selective-raft", "selective_igev": "selective-igev"}
 
 
 def _pair(width: int, height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -177,18 +178,19 @@ def training_steps_per_s(steps: int) -> float:
     return steps / (time.perf_counter() - started)
 
 
-def run_model_bench(repeats: int = 2, train_steps: int = 3, raft_stereo: bool = True,
-                    selective_raft: bool = True) -> dict[str, Any]:
-    """The JSON of ``illusion-studio bench model``; ``raft_stereo``, ``selective_raft``: also time that
-    baseline's network (once each: minutes on a 2-core CPU)."""
+def run_model_bench(repeats: int = 2, train_steps: int = 3, skip: Collection[str] = ()) -> dict[str, Any]:
+    """The JSON of ``illusion-studio bench model``: every baseline's network of :data:`BASELINES` timed
+    too (once each: minutes on a 2-core CPU) but those whose keys ``skip`` names."""
+    unknown = set(skip) - set(BASELINES)
+    if unknown:
+        raise ValueError(f"unknown baseline(s) {', '.join(sorted(unknown))}; choose from {', '.join(BASELINES)}")
     left, right, mono = _pair(1920, 1080)
-    wanted = {"raft_stereo": raft_stereo, "selective_raft": selective_raft}
     with tempfile.TemporaryDirectory() as tmp:
         pair_file = Path(tmp) / "pair.npz"
         np.savez(pair_file, left=left, right=right, mono=mono)
         child = _timed(pair_file, repeats, "lite")  # as shipped: the eye, its package's weights
         patches = _timed(pair_file, repeats, "lite", PATCHES)
-        baselines = {key: _timed(pair_file, 1, preset) for key, preset in BASELINES.items() if wanted[key]}
+        baselines = {key: _timed(pair_file, 1, preset) for key, preset in BASELINES.items() if key not in skip}
     with open("/proc/loadavg") as handle:
         load = float(handle.read().split()[0])
     return {

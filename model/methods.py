@@ -1,9 +1,10 @@
 """The methods an evaluation compares, each a disparity predictor over :class:`StereoSample`s.
 
 ``fusion``, ``stereo`` and ``mono_align`` share one forward pass of a fusion checkpoint per
-sample; ``raft_stereo`` and ``selective_raft`` are stereo-only networks' disparities (RAFT-Stereo's,
-Selective-RAFT's, e.g. imported published checkpoints: :data:`BASELINE_METHODS`); each network method
-may have a checkpoint of its own, and methods that share one share its forward pass. ``mono_gt_align``
+sample; ``raft_stereo``, ``selective_raft`` and ``selective_igev`` are stereo-only networks'
+disparities (RAFT-Stereo's, Selective-RAFT's, Selective-IGEV's, e.g. imported published checkpoints:
+:data:`BASELINE_METHODS`); each network method may have a checkpoint of its own, and methods that
+share one share its forward pass. ``mono_gt_align``
 and ``sgbm`` need no network (torch loads only when a network method is asked for); ``predictions``
 reads another program's PFMs.
 """
@@ -26,17 +27,21 @@ from model.align import AlignRule, align
 
 class Baseline(NamedTuple):
     """A baseline network's method: the model.architecture its checkpoint must have, the network's
-    name, and the checkpoint a message gives as an example."""
+    name, the checkpoint a message gives as an example, and what `checkpoints import --from
+    ARCHITECTURE` needs besides the file for its published files (shown where none is imported yet)."""
 
     architecture: str
     title: str
     example: str
+    import_flags: str = ""
 
 
 # Each scores its own checkpoint's disparity.
 BASELINE_METHODS: dict[str, Baseline] = {
     "raft_stereo": Baseline("raft-stereo", "RAFT-Stereo", "imported:raftstereo-sceneflow"),
-    "selective_raft": Baseline("selective-raft", "Selective-RAFT", "imported:sceneflow")}
+    "selective_raft": Baseline("selective-raft", "Selective-RAFT", "imported:sceneflow"),
+    "selective_igev": Baseline("selective-igev", "Selective-IGEV", "imported:selective-igev-sceneflow",
+                               "--max-disp 192")}  # no tensor holds it: 768 for middlebury_finetune
 METHODS = ("fusion", "stereo", "mono_align", *BASELINE_METHODS, "mono_gt_align", "sgbm", "predictions")
 NETWORK_METHODS = ("fusion", "stereo", "mono_align", *BASELINE_METHODS)
 FUSION_METHODS = ("fusion", "stereo", "mono_align")  # read from one fusion checkpoint's forward pass

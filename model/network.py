@@ -2,8 +2,8 @@
 RAFT-Stereo's ``raft_stereo.py`` does: mono branch → context → stereo GRU iterations → VLM
 embeddings → flow confidence → global fusion. With ``model.architecture = "raft-stereo"`` (or
 another of :data:`BASELINE_BRANCHES`) the same class is that paper's own stereo-only network
-(model/stereo/raft_stereo.py, model/stereo/selective_raft.py), so training, checkpoints, prediction
-and evaluation treat them alike."""
+(model/stereo/raft_stereo.py, selective_raft.py, selective_igev.py), so training, checkpoints,
+prediction and evaluation treat them alike."""
 
 from __future__ import annotations
 
@@ -20,6 +20,7 @@ from model.mono import make_mono, normalize_mono
 from model.presets import ModelConfig
 from model.stereo.raft import StereoBranch, StereoResult
 from model.stereo.raft_stereo import RaftStereoBranch
+from model.stereo.selective_igev import SelectiveIgevBranch
 from model.stereo.selective_raft import SelectiveRaftBranch
 from model.vlm import make_vlm
 
@@ -28,7 +29,8 @@ from model.vlm import make_vlm
 FROZEN_PREFIXES = ("mono.backbone.", "vlm.backbone.")
 # The stereo-only networks by model.architecture: images normalised to [−1, 1] → StereoResult.
 BASELINE_BRANCHES: dict[str, type[nn.Module]] = {"raft-stereo": RaftStereoBranch,
-                                                 "selective-raft": SelectiveRaftBranch}
+                                                 "selective-raft": SelectiveRaftBranch,
+                                                 "selective-igev": SelectiveIgevBranch}
 
 
 @dataclass

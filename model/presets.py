@@ -23,7 +23,7 @@ PRESETS: tuple[str, ...] = ("lite", "paper")
 BASELINE_PRESETS: tuple[str, ...] = ("raft-stereo",)
 ALL_PRESETS: tuple[str, ...] = PRESETS + BASELINE_PRESETS
 # Networks that only published files fill (`checkpoints import`): loadable, not offered for training.
-IMPORT_PRESETS: tuple[str, ...] = ("selective-raft",)
+IMPORT_PRESETS: tuple[str, ...] = ("selective-raft", "selective-igev")
 PRESET_DIR = Path(__file__).parent / "presets"
 # RAFT-Stereo's demo pads a pair centred to a multiple of 32 (its InputPadder); an imported
 # checkpoint predicts what the demo does only with the same padding (instance norm sees it).
@@ -32,9 +32,12 @@ RAFT_STEREO_PAD = 32
 MonoBackend = Literal["precomputed", "depth-anything-v2"]
 VlmBackend = Literal["lite", "qwen2-vl"]
 FusionRule = Literal["paper", "released"]
-Architecture = Literal["fusion", "raft-stereo", "selective-raft"]
+Architecture = Literal["fusion", "raft-stereo", "selective-raft", "selective-igev"]
 # The stereo-only networks of other papers, each with the centred padding of its demo.
-BASELINE_ARCHITECTURES: tuple[str, ...] = ("raft-stereo", "selective-raft")
+BASELINE_ARCHITECTURES: tuple[str, ...] = ("raft-stereo", "selective-raft", "selective-igev")
+# Baselines whose image sides must be a multiple of a fixed size, whatever their GRU levels: Selective-IGEV's
+# features reach 1/32 (its cost volume at 1/4 is halved three times).
+FIXED_SIZE_MULTIPLE: dict[str, int] = {"selective-igev": 32}
 ContextNorm = Literal["batch", "instance", "group", "none"]
 UpsampleBorder = Literal["edge", "zeros"]
 ConfidenceTarget = Literal["threshold", "closer"]
@@ -122,12 +125,17 @@ class ModelConfig:
     # What the convex upsampling's 3×3 window sees past the border: "edge" (replicated, keeps the
     # outer pixels right) or "zeros" (RAFT's, which its published weights were trained with).
     upsample_border: UpsampleBorder = "edge"
+    # Selective-IGEV's --max_disp: the disparities its cost volume spans, in full-resolution pixels (a
+    # multiple of 32). No tensor depends on it and its published files differ (192; 768 for Middlebury).
+    max_disp: int = 192
 
     @property
     def size_multiple(self) -> int:
         """What both image sides must be a multiple of, in pixels: the GRU's coarsest level, the
         flow's tokens and the lite VLM's patches all tile the image exactly (its EfficientNet-Lite0
         eye's stride 16 divides the GRU's coarsest level, 2**(n_downsample + 2) ≥ 16)."""
+        if self.architecture in FIXED_SIZE_MULTIPLE:
+            return FIXED_SIZE_MULTIPLE[self.architecture]
         if self.architecture in BASELINE_ARCHITECTURES:
             return 2 ** (self.n_downsample + self.gru_levels - 1)
         multiples = [2 ** (self.n_downsample + 2), 2**self.token_downsample]
@@ -137,8 +145,8 @@ class ModelConfig:
 
     @property
     def inference_padding(self) -> tuple[int, bool]:
-        """How a predictor pads a pair: (to a multiple of this many pixels, centred). RAFT-Stereo and
-        Selective-RAFT pad centred to 32 with replication, as their demos do; the fusion network
+        """How a predictor pads a pair: (to a multiple of this many pixels, centred). RAFT-Stereo,
+        Selective-RAFT and Selective-IGEV pad centred to 32 with replication, as their demos do; the fusion network
         bottom/right to its size multiple."""
         if self.architecture in BASELINE_ARCHITECTURES:
             return math.lcm(RAFT_STEREO_PAD, self.size_multiple), True
@@ -162,6 +170,8 @@ class ModelConfig:
         if not self.use_mono and (self.use_vlm or self.mono_backend != "precomputed"):
             raise ValueError("model.use_mono = false (stereo only) needs model.use_vlm = false and "
                              "model.mono_backend = 'precomputed' (the context encoder that is fed no mono)")
+        if self.max_disp <= 0 or self.max_disp % 32:
+            raise ValueError(f"model.max_disp must be a positive multiple of 32, got {self.max_disp}")
         if self.max_inference_pixels < 0:
             raise ValueError("model.max_inference_pixels must be >= 0 (0: full resolution)")
         if self.fusion_pool_kernel % 2 == 0:

@@ -1,7 +1,9 @@
 """Selective-IGEV's published checkpoints (Windsrain/Selective-Stereo, MIT: ``sceneflow.pth``, its KITTI,
-ETH3D and Middlebury fine-tunes) as a loaded :class:`~model.stereo.selective_igev.SelectiveIGEV`: a
-DataParallel state dict (keys under ``module.``), read weights-only, the architecture inferred from the
-tensors where they settle it, every key placed.
+ETH3D and Middlebury fine-tunes) as checkpoints of the ``selective-igev`` network (its branch,
+:class:`~model.stereo.selective_igev.SelectiveIgevBranch`): a DataParallel state dict (keys under
+``module.``), read weights-only, the architecture inferred from the tensors where they settle it, every
+key placed. The checkpoint importer of ``checkpoints import --from selective-igev`` (model/runs/registry.py
+``STEREO_IMPORTERS``: :func:`convert` and :data:`FLAGS`; model.raft_import writes the result).
 
 What the tensors fix: the GRU levels (``update_block.gru16``/``gru08`` present or not), the GRU width (128,
 the only one the channel attention allows) and the correlation planes the motion encoder reads
@@ -22,14 +24,17 @@ from __future__ import annotations
 
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
 import torch
 from torch import Tensor
 
-from model.stereo.selective_igev import DEMO_ITERATIONS, GROUPS, HIDDEN, SelectiveIGEV, SelectiveIGEVConfig
+from model.network import FusionNetwork
+from model.presets import Config, load_preset
+from model.raft_import import Conversion, NotImportable, tensors_only
+from model.stereo.selective_igev import DEMO_ITERATIONS, GROUPS, HIDDEN
 
 SOURCE = "selective-igev"
 CORR_LEVELS, CORR_RADIUS = 2, 4  # every published file's: 2 × 9 × 9 = 162 planes
@@ -40,7 +45,7 @@ _DUPLICATE = re.compile(r"\.norm3\.")
 _TRAINING_ONLY = ("spx.", "spx_2.", "spx_4.")
 
 
-class NotSelectiveIGEV(ValueError):
+class NotSelectiveIGEV(NotImportable):
     """A file that is not a Selective-IGEV checkpoint, or whose architecture needs flags (the message
     says what is missing, unknown, or which flags to give)."""
 
@@ -56,14 +61,8 @@ class Flags:
     iterations: int | None = None
 
 
-@dataclass(frozen=True)
-class Conversion:
-    network: SelectiveIGEV  # every tensor from the file, float32, eval mode, on the CPU
-    architecture: dict[str, Any]  # n_gru_layers, corr_levels, corr_radius, max_disp, iterations, dtype, given
-    keys_loaded: int  # the network's tensors, each from the file
-    tensors_in_file: int
-    duplicates: int  # norm3 tensors, the same module as their block's downsample.1
-    unused: list[str] = field(default_factory=list)  # the file's keys that test mode never reads
+FLAGS = tuple(flag.name for flag in fields(Flags))  # a Selective-IGEV file may need any of them
+PREFIX = "stereo_branch."  # where the selective-igev network keeps Selective-IGEV
 
 
 def _prefixes() -> list[tuple[str, str]]:
@@ -110,11 +109,6 @@ def _never_run(key: str, levels: int) -> bool:
     return any(key.startswith(prefix) for pair in coarse for prefix in pair)
 
 
-def strip_module(state: Mapping[str, Any]) -> dict[str, Any]:
-    """Keys without DataParallel's ``module.`` (every published file has it)."""
-    return {key.removeprefix("module."): value for key, value in state.items()}
-
-
 def infer_architecture(state: Mapping[str, Tensor], flags: Flags = Flags()) -> dict[str, Any]:
     """The network's options for a Selective-IGEV state dict (``module.`` stripped): ``{"n_gru_layers",
     "corr_levels", "corr_radius", "max_disp", "iterations", "dtype", "given"}``. NotSelectiveIGEV naming
@@ -154,34 +148,37 @@ def infer_architecture(state: Mapping[str, Tensor], flags: Flags = Flags()) -> d
         raise NotSelectiveIGEV(f"--max-disp {flags.max_disp}: must be a positive multiple of 32 (the cost volume at "
                                f"1/4 is halved three times)")
     if flags.iterations is not None and flags.iterations < 1:
-        raise NotSelectiveIGEV(f"--iterations {flags.iterations}: must be at least 1")
+        raise NotSelectiveIGEV(f"--iters {flags.iterations}: must be at least 1")
     dtypes = sorted({str(t.dtype).removeprefix("torch.") for t in state.values() if t.is_floating_point()})
     given = sorted(name for name, value in vars(flags).items() if value is not None)
     return {"n_gru_layers": levels, "corr_levels": corr[0], "corr_radius": corr[1], "max_disp": flags.max_disp,
             "iterations": flags.iterations or DEMO_ITERATIONS, "dtype": "/".join(dtypes), "given": given}
 
 
-def network_for(architecture: Mapping[str, Any]) -> SelectiveIGEV:
-    """A fresh (untrained) network of ``architecture`` as :func:`infer_architecture` reports it: with
-    ``Conversion.network.state_dict()`` saved beside the architecture, how an imported checkpoint is
-    rebuilt (``network_for(arch).load_state_dict(saved)``, then ``.eval()``)."""
-    return SelectiveIGEV(SelectiveIGEVConfig(n_gru_layers=architecture["n_gru_layers"],
-                                             corr_levels=architecture["corr_levels"],
-                                             corr_radius=architecture["corr_radius"], max_disp=architecture["max_disp"]))
+def config_for(architecture: Mapping[str, Any]) -> Config:
+    """The ``selective-igev`` preset at ``architecture`` (as :func:`infer_architecture` reports it): its
+    GRU levels, correlation, max_disp and default iterations; float32, as the demo runs."""
+    return load_preset(SOURCE, {"gru_levels": architecture["n_gru_layers"], "corr_levels": architecture["corr_levels"],
+                                "corr_radius": architecture["corr_radius"], "max_disp": architecture["max_disp"],
+                                "test_iters": architecture["iterations"], "amp": False})
+
+
+def network_for(architecture: Mapping[str, Any]) -> FusionNetwork:
+    """A fresh (untrained) ``selective-igev`` network of ``architecture``: what a saved import is
+    rebuilt as (``network_for(arch).load_state_dict(saved)``, then ``.eval()``)."""
+    return FusionNetwork(config_for(architecture).model)
 
 
 def convert(state: Mapping[str, Any], flags: Flags = Flags()) -> Conversion:
-    """A Selective-IGEV state dict (as loaded; ``module.`` optional) → the network with every tensor
-    from it, float32, eval mode. NotSelectiveIGEV naming what is missing, unknown or of the wrong
+    """A Selective-IGEV state dict (as loaded; ``module.`` optional) → the ``selective-igev`` network's
+    config (its test iterations the demo's 32, or ``flags.iterations``) and the network with every
+    tensor from it, float32, eval mode. NotSelectiveIGEV naming what is missing, unknown or of the wrong
     shape, or the flags to give (:func:`infer_architecture`)."""
-    state = strip_module(state)
-    not_tensors = [key for key, value in state.items() if not isinstance(value, torch.Tensor)]
-    if not_tensors:
-        raise NotSelectiveIGEV(f"not a state dict of tensors: {not_tensors[0]} is a "
-                               f"{type(state[not_tensors[0]]).__name__}")
+    state = tensors_only(state, NotSelectiveIGEV)
     arch = infer_architecture(state, flags)
-    network = network_for(arch)
-    expected = network.state_dict()
+    config = config_for(arch)
+    network = FusionNetwork(config.model)
+    expected = network.stereo_branch.state_dict()
     mapped: dict[str, Tensor] = {}
     unknown, unused, duplicates = [], [], 0
     for key, tensor in state.items():
@@ -207,8 +204,9 @@ def convert(state: Mapping[str, Any], flags: Flags = Flags()) -> Conversion:
                                    f"expected {tuple(expected[key].shape)}")
         if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all()):
             raise NotSelectiveIGEV(f"{to_theirs(key)} holds values that are not finite")
-    network.load_state_dict(mapped, strict=True)  # copies into float32 parameters: a half file is upcast
-    return Conversion(network.eval(), arch, len(mapped), len(state), duplicates, unused)
+    # Copied into the network's float32 parameters: a half file is upcast.
+    network.load_state_dict({PREFIX + key: tensor for key, tensor in mapped.items()}, strict=True)
+    return Conversion(config, network.eval(), arch, len(state), duplicates, unused)
 
 
 def _few(keys: list[str]) -> str:
@@ -227,5 +225,5 @@ def read_published(path: Path) -> dict[str, Any]:
 
 
 def load_selective_igev(path: Path, flags: Flags = Flags()) -> Conversion:
-    """The published file at ``path`` as a loaded network in eval mode (:func:`convert`)."""
+    """The published file at ``path`` as the loaded ``selective-igev`` network in eval mode (:func:`convert`)."""
     return convert(read_published(path), flags)

@@ -16,6 +16,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 import model.stereo.selective_igev as selective_igev  # noqa: E402
+from model.raft_import import strip_module  # noqa: E402
 from model.selective_igev_import import (  # noqa: E402
     Flags,
     NotSelectiveIGEV,
@@ -23,7 +24,6 @@ from model.selective_igev_import import (  # noqa: E402
     infer_architecture,
     load_selective_igev,
     network_for,
-    strip_module,
     to_theirs,
 )
 from model.stereo.selective_igev import SelectiveIGEV, SelectiveIGEVConfig, predict_disparity  # noqa: E402
@@ -51,7 +51,7 @@ def state(fixture: dict) -> dict:
 
 @pytest.fixture()
 def network(state: dict) -> SelectiveIGEV:
-    return convert(state, PUBLISHED).network
+    return convert(state, PUBLISHED).network.stereo_branch
 
 
 def test_published_file_predicts_what_selective_igev_does(fixture: dict, state: dict, tmp_path: Path) -> None:
@@ -61,15 +61,15 @@ def test_published_file_predicts_what_selective_igev_does(fixture: dict, state: 
     torch.save(state, published)
     conversion = load_selective_igev(published, PUBLISHED)
     in_file, loaded, duplicates, unused = COUNTS
-    assert (conversion.tensors_in_file, conversion.keys_loaded, conversion.duplicates, len(conversion.unused)) \
-        == COUNTS
+    keys_loaded = len(conversion.network.state_dict())
+    assert (conversion.tensors_in_file, keys_loaded, conversion.duplicates, len(conversion.unused)) == COUNTS
     assert in_file == loaded + duplicates + unused  # every tensor of the file has its place or its reason
     assert conversion.architecture == {"n_gru_layers": 3, "corr_levels": 2, "corr_radius": 4, "max_disp": 192,
                                        "iterations": 32, "dtype": "float32", "given": ["max_disp"]}
     assert not conversion.network.training
     rebuilt = network_for(conversion.architecture)  # as a saved import is rebuilt: architecture + state dict
     rebuilt.load_state_dict(conversion.network.state_dict(), strict=True)
-    ours = predict_disparity(conversion.network, fixture["left"], fixture["right"])
+    ours = predict_disparity(conversion.network.stereo_branch, fixture["left"], fixture["right"])
     assert ours.dtype == np.float32 and ours.shape == (height, width)
     reference = fixture["disparity"]
     assert np.ptp(reference) > 50  # a disparity that varies, not a constant the network cannot miss
@@ -131,7 +131,7 @@ def test_the_tensors_settle_gru_levels_and_correlation_planes(state: dict) -> No
     # The reference builds the context encoder's 1/16 stage whatever the levels: with 2 it never runs.
     coarse = {key: value for key, value in state.items() if key.startswith(("module.cnet.layer5.", "module.cnet.outputs16."))}
     two = convert({**_theirs(SelectiveIGEVConfig(n_gru_layers=2)), **coarse}, PUBLISHED)
-    assert two.architecture["n_gru_layers"] == 2 and not hasattr(two.network.update_block, "gru16")
+    assert two.architecture["n_gru_layers"] == 2 and not hasattr(two.network.stereo_branch.update_block, "gru16")
     assert sorted(two.unused) == sorted(key.removeprefix("module.") for key in coarse if ".norm3." not in key)
     assert two.duplicates == 5 and len(coarse) == 44  # norm3 (5 tensors) counts as the duplicate it is
     wide = _theirs(SelectiveIGEVConfig(corr_levels=3, corr_radius=2))  # 3 × 9 × 5 = 135 planes
@@ -147,7 +147,7 @@ def test_a_half_precision_file_is_upcast(state: dict) -> None:
     half = {key: value.half() if value.is_floating_point() else value for key, value in state.items()}
     conversion = convert(half, PUBLISHED)
     assert conversion.architecture["dtype"] == "float16"
-    weight = conversion.network.feature.conv_stem.weight
+    weight = conversion.network.stereo_branch.feature.conv_stem.weight
     assert weight.dtype == torch.float32
     assert torch.equal(weight, half["module.feature.conv_stem.weight"].float())
 

@@ -25,6 +25,7 @@ import json
 import os
 import re
 import uuid
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -230,32 +231,33 @@ def resolve_depth_model(settings: Any | None, text: str) -> ResolvedCheckpoint:
 
 
 # Stereo networks whose published files import (`checkpoints import --from SOURCE`): the module
-# holding each one's ``convert`` and ``FLAGS`` (the model.raft_import.Flags fields its files may need).
-STEREO_IMPORTERS: dict[str, str] = {"raft-stereo": "model.raft_import", "selective-raft": "model.selective_raft_import"}
+# holding each one's ``convert``, its ``Flags`` and ``FLAGS`` (the Flags fields its files may need).
+STEREO_IMPORTERS: dict[str, str] = {"raft-stereo": "model.raft_import", "selective-raft": "model.selective_raft_import",
+                                    "selective-igev": "model.selective_igev_import"}
 IMPORT_SOURCES = (*STEREO_IMPORTERS, "depth-anything-v2")
-# How the CLI spells each architecture flag (model.raft_import.Flags' fields).
+# How the CLI spells each architecture flag (the importers' Flags fields).
 FLAG_OPTIONS = {"context_norm": "--context-norm", "slow_fast_gru": "--slow-fast", "corr_levels": "--corr-levels",
-                "corr_radius": "--corr-radius", "iterations": "--iters"}
+                "corr_radius": "--corr-radius", "max_disp": "--max-disp", "iterations": "--iters"}
 
 
 def import_checkpoint(settings: Any, file: Path, *, source: str, name: str | None = None,
-                      replace: bool = False, flags: Any = None) -> dict[str, Any]:
+                      replace: bool = False, flags: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Convert the published checkpoint ``file`` (``source``: one of IMPORT_SOURCES) and register it
     in the workspace as ``imported:NAME`` (default NAME: the file's stem): a stereo network's file
     (STEREO_IMPORTERS) as ``NAME.pt``, a Depth Anything V2 one as the directory ``NAME/``. Returns
     ``{"checkpoint": the name, "architecture", "keys_loaded", …}``; InvalidInput for a bad name or a
     file that is not such a checkpoint (one line), Conflict when the name is taken and ``replace`` is
-    not given. ``flags``: a stereo file's architecture where its tensors do not settle it
-    (``model.raft_import.Flags``; InvalidInput for a flag its network has no use for)."""
+    not given. ``flags``: a stereo file's architecture where its tensors do not settle it, by its
+    importer's ``Flags`` field (those given; InvalidInput for a flag its network has no use for)."""
     if source not in IMPORT_SOURCES:
         raise InvalidInput(f"unknown checkpoint source {source!r}; choose one of {', '.join(IMPORT_SOURCES)}")
-    if flags is not None and source not in STEREO_IMPORTERS:
-        raise InvalidInput(f"architecture flags are for stereo networks' files (RAFT-Stereo, Selective-RAFT); "
+    given = {field: value for field, value in (flags or {}).items() if value is not None}
+    if given and source not in STEREO_IMPORTERS:
+        raise InvalidInput(f"architecture flags are for stereo networks' files ({', '.join(STEREO_IMPORTERS)}); "
                            f"a {source} file's tensors settle its own")
     importer = importlib.import_module(STEREO_IMPORTERS[source]) if source in STEREO_IMPORTERS else None
-    if importer is not None and flags is not None:
-        refused = [FLAG_OPTIONS[field] for field, value in vars(flags).items()
-                   if value is not None and field not in importer.FLAGS]
+    if importer is not None:
+        refused = [FLAG_OPTIONS.get(field, field) for field in given if field not in importer.FLAGS]
         if refused:
             raise InvalidInput(f"{', '.join(refused)}: not an option of {source} files (its code fixes it or never reads it)")
     name = name or re.sub(r"[^A-Za-z0-9._-]", "-", Path(file).stem).lstrip("._-")[:64] or source
@@ -275,10 +277,9 @@ def import_checkpoint(settings: Any, file: Path, *, source: str, name: str | Non
 
         import_file = functools.partial(import_depth, read=read_weights_only)
     else:
-        from model.raft_import import Flags
         from model.raft_import import import_file as import_stereo
 
-        import_file = functools.partial(import_stereo, flags=flags or Flags(), converter=importer.convert,
+        import_file = functools.partial(import_stereo, flags=importer.Flags(**given), converter=importer.convert,
                                         source=source)
     try:
         result = import_file(Path(file), destination)

@@ -255,7 +255,8 @@ class EvaluationLaunch(_Strict):
                                                             "imported:NAME or {run, checkpoint} (default: the current model)")
     checkpoints: dict[Method, CheckpointName] = Field(  # type: ignore[valid-type]
         default_factory=dict, max_length=len(NETWORK_METHODS),
-        description="a checkpoint per network method (raft-stereo and selective-raft need one), over checkpoint")
+        description="a checkpoint per network method (raft-stereo, selective-raft and selective-igev need one), "
+                    "over checkpoint")
     run: Id | None = Field(None, description="a run whose held-out test split to evaluate on "
                                              "(default: the checkpoint's run)")
     data: FolderData | None = Field(None, description="a dataset folder instead of a run's test split")

@@ -2,7 +2,9 @@
 IGEV-Stereo whose GRUs are Selective Recurrent Units — per level a 1×1-kernel and a 3×3-kernel GRU
 blended by a spatial attention map from the context (the "contextual spatial attention"), the context
 itself scaled by a channel attention. Inference as its demo runs it (test mode: only the last iterate
-is upsampled), float32.
+is upsampled), float32: :func:`predict_disparity` alone, or as the stereo branch of a
+``model.architecture = "selective-igev"`` network (:class:`SelectiveIgevBranch`), which `predict` and
+`evaluate` run with the same padding.
 
 Layout and names are the published checkpoints' (``module.`` stripped) except where a module is the
 project's own: the context encoder (RAFT-Stereo's MultiBasicEncoder, :class:`ContextEncoder`) and the
@@ -32,6 +34,7 @@ from model.stereo.igev_volume import (
     groupwise_volume,
 )
 from model.stereo.mobilenet_features import MobileNetV2Stem, mobilenetv2_stages
+from model.stereo.raft import StereoResult
 from model.stereo.raft_stereo import ContextEncoder
 from model.stereo.update import MotionEncoder, pool2x, resize_like
 
@@ -197,8 +200,10 @@ class SelectiveUpdate(nn.Module):
 
 
 class SelectiveIGEV(nn.Module):
-    """Images B×3×H×W in 0…255 (H, W multiples of 32) → disparity B×1×H×W, pixels, positive (left x
-    matches right x − d): the last of ``iters`` refinements, upsampled from 1/4 (the reference's test mode)."""
+    """Images normalised to [−1, 1] (B×3×H×W, H and W multiples of 32) → :class:`StereoResult`: disparity
+    iterates in pixels, positive (left x matches right x − d), at 1/4 (``iterates_low``, in 1/4-resolution
+    pixels) and upsampled to H×W (``iterates``: the last only unless ``all_iterates``, the reference's test
+    mode). The branch protocol of model.network's baselines (:class:`SelectiveIgevBranch`)."""
 
     def __init__(self, config: SelectiveIGEVConfig = SelectiveIGEVConfig()) -> None:
         super().__init__()
@@ -226,11 +231,10 @@ class SelectiveIGEV(nn.Module):
         self.cost_agg = Hourglass(GROUPS)
         self.classifier = nn.Conv3d(GROUPS, 1, 3, 1, 1, bias=False)
 
-    def forward(self, left: Tensor, right: Tensor, iters: int = DEMO_ITERATIONS) -> Tensor:
+    def forward(self, left: Tensor, right: Tensor, *, iters: int = DEMO_ITERATIONS,
+                all_iterates: bool = False) -> StereoResult:
         if iters < 1:
             raise ValueError(f"iters must be at least 1, got {iters}")
-        left = 2 * (left / 255.0) - 1.0
-        right = 2 * (right / 255.0) - 1.0
         features_left, features_right = self.feature(left), self.feature(right)
         stem_2x = self.stem_2(left)
         stem_2y = self.stem_2(right)
@@ -252,13 +256,28 @@ class SelectiveIGEV(nn.Module):
 
         encoding = GeometryEncoding(match_left.float(), match_right.float(), geometry.float(),
                                     levels=self.config.corr_levels, radius=self.config.corr_radius)
-        mask_features = None
-        for _ in range(iters):
+        low: list[Tensor] = []
+        full: list[Tensor] = []
+        weights = None
+        for step in range(iters):
+            disparity = disparity.detach()  # as the reference trains: no gradient through earlier iterates
             net, mask_features, delta = self.update_block(net, inp, encoding(disparity), disparity, att)
             disparity = disparity + delta
-        assert mask_features is not None
-        weights = F.softmax(self.spx_gru(self.spx_2_gru(mask_features, stem_2x)), 1)
-        return context_upsample(disparity * 4.0, weights).unsqueeze(1)
+            low.append(disparity)
+            if all_iterates or step == iters - 1:  # test mode upsamples the last iterate only
+                weights = F.softmax(self.spx_gru(self.spx_2_gru(mask_features, stem_2x)), 1)
+                full.append(context_upsample(disparity * 4.0, weights).unsqueeze(1))
+        assert weights is not None
+        return StereoResult(low, full, net[0], weights, match_left, encoding)  # type: ignore[arg-type]
+
+
+class SelectiveIgevBranch(SelectiveIGEV):
+    """Selective-IGEV as the stereo branch of a ``model.architecture = "selective-igev"`` network
+    (model/network.py's BASELINE_BRANCHES): its options from the model config."""
+
+    def __init__(self, config: ModelConfig) -> None:
+        super().__init__(SelectiveIGEVConfig(n_gru_layers=config.gru_levels, corr_levels=config.corr_levels,
+                                             corr_radius=config.corr_radius, max_disp=config.max_disp))
 
 
 def centred_padding(height: int, width: int, multiple: int = PAD_MULTIPLE) -> tuple[int, int, int, int]:
@@ -287,9 +306,9 @@ def predict_disparity(network: SelectiveIGEV, left: np.ndarray, right: np.ndarra
 
     def tensor(image: np.ndarray) -> Tensor:
         t = torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None].float().to(device)
-        return F.pad(t, padding, mode="replicate")
+        return 2 * (F.pad(t, padding, mode="replicate") / 255.0) - 1.0  # as the network's first step in the demo
 
     with torch.inference_mode():
-        out = network(tensor(left), tensor(right), iters=iters)
+        out = network(tensor(left), tensor(right), iters=iters).iterates[-1]
     top, pad_left = padding[2], padding[0]
     return out[0, 0, top:top + height, pad_left:pad_left + width].float().cpu().numpy().astype(np.float32)

@@ -43,7 +43,7 @@ function launchBody() {
     body.run = Number(f.run.value);
   }
   // Checkpoints by name, as `predict --checkpoint` takes them; each baseline (raft-stereo,
-  // selective-raft) scores its own.
+  // selective-raft, selective-igev) scores its own.
   if (f.checkpoint.value) body.checkpoint = f.checkpoint.value;
   for (const select of form.querySelectorAll("select[data-baseline]")) {
     if (body.methods.includes(select.dataset.baseline) && select.value) {
@@ -75,8 +75,9 @@ form.addEventListener("submit", async (event) => {
 keyboardHelp([], {
   note: "Score methods on a run's held-out test split (samples its training never read) or on a folder inside a " +
     "registered dataset root. fusion, stereo and mono-align use the chosen checkpoint, raft-stereo its own (an imported " +
-    "RAFT-Stereo checkpoint, or a raft-stereo run's), selective-raft its own (an imported Selective-RAFT one); best and last are pinned to " +
-    "their step when the evaluation is launched. A refused launch names its field under it.",
+    "RAFT-Stereo checkpoint, or a raft-stereo run's), selective-raft and selective-igev each its own (an imported " +
+    "Selective-RAFT or Selective-IGEV one); best and last are pinned to their step when the evaluation is launched. " +
+    "A refused launch names its field under it.",
 });
 
 poll(refresh, 2000);

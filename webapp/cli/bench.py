@@ -173,14 +173,17 @@ def memory_benchmark(as_json: bool) -> None:
               help="Skip RAFT-Stereo's network (32 iterations at 1080p: minutes on a CPU).")
 @click.option("--no-selective-raft", "no_selective_raft", is_flag=True,
               help="Skip Selective-RAFT's network (32 iterations at 1080p: minutes on a CPU).")
+@click.option("--no-selective-igev", "no_selective_igev", is_flag=True,
+              help="Skip Selective-IGEV's network (32 iterations at 1080p, max_disp 192: minutes on a CPU).")
 def model_benchmark(as_json: bool, repeats: int, train_steps: int, no_raft_stereo: bool,
-                    no_selective_raft: bool) -> None:
-    """The lite fusion model on a 1080p pair (own process: seconds, peak MB) beside OpenCV SGBM, RAFT-Stereo's
-    and Selective-RAFT's networks; parameters; train steps/s."""
+                    no_selective_raft: bool, no_selective_igev: bool) -> None:
+    """The lite fusion model on a 1080p pair (own process: seconds, peak MB) beside OpenCV SGBM, RAFT-Stereo's,
+    Selective-RAFT's and Selective-IGEV's networks; parameters; train steps/s."""
     from benchmarks.model import run_model_bench
 
-    _report(run_model_bench(repeats=repeats, train_steps=train_steps, raft_stereo=not no_raft_stereo,
-                            selective_raft=not no_selective_raft), as_json)
+    skipped = {"raft_stereo": no_raft_stereo, "selective_raft": no_selective_raft, "selective_igev": no_selective_igev}
+    _report(run_model_bench(repeats=repeats, train_steps=train_steps,
+                            skip=[key for key, skip in skipped.items() if skip]), as_json)
 
 
 def _lite_overrides(ctx: click.Context, param: click.Parameter, values: tuple[str, ...]) -> dict[str, str]:

@@ -16,7 +16,8 @@ from webapp.cli.state import CliState, pass_state
 @click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--from", "source", required=True, type=click.Choice(registry.IMPORT_SOURCES),
               help="Whose checkpoint FILE is: raft-stereo (princeton-vl/RAFT-Stereo's published files), "
-                   "selective-raft (Windsrain/Selective-Stereo's Selective-RAFT files) or "
+                   "selective-raft or selective-igev (Windsrain/Selective-Stereo's Selective-RAFT and "
+                   "Selective-IGEV files) or "
                    "depth-anything-v2 (DepthAnything/Depth-Anything-V2's depth_anything_v2_vit*.pth).")
 @click.option("--name", default=None, help="Register it as imported:NAME (default: FILE's name, no extension).")
 @click.option("--replace", is_flag=True, help="Replace an imported checkpoint of that name.")
@@ -26,9 +27,14 @@ from webapp.cli.state import CliState, pass_state
 @click.option("--slow-fast/--no-slow-fast", "slow_fast", default=None,
               help="RAFT-Stereo's --slow_fast_gru (no tensor holds it): needed unless the file is a published layout.")
 @click.option("--corr-levels", type=click.IntRange(1, 8), default=None,
-              help="--corr_levels (RAFT-Stereo, Selective-RAFT): needed unless the file is a published layout.")
+              help="--corr_levels (RAFT-Stereo, Selective-RAFT, Selective-IGEV): needed unless the file is a "
+                   "published layout.")
 @click.option("--corr-radius", type=click.IntRange(1, 16), default=None,
-              help="--corr_radius (RAFT-Stereo, Selective-RAFT): needed unless the file is a published layout.")
+              help="--corr_radius (RAFT-Stereo, Selective-RAFT, Selective-IGEV): needed unless the file is a "
+                   "published layout.")
+@click.option("--max-disp", type=click.IntRange(32, 4096), default=None,
+              help="Selective-IGEV's --max_disp, pixels (no tensor holds it; required): 192 for its SceneFlow, "
+                   "KITTI and ETH3D files, 768 for middlebury_finetune.")
 @click.option("--iters", type=click.IntRange(1, 256), default=None,
               help="Its default iterations for predict and evaluate (default: the published file's documented "
                    "ones — RAFT-Stereo realtime 7, the others 32 — else the demo's 32).")
@@ -36,23 +42,19 @@ from webapp.cli.state import CliState, pass_state
 @pass_state
 def import_checkpoint(state: CliState, file: Path, source: str, name: str | None, replace: bool,
                       context_norm: str | None, slow_fast: bool | None, corr_levels: int | None,
-                      corr_radius: int | None, iters: int | None, as_json: bool) -> None:
+                      corr_radius: int | None, max_disp: int | None, iters: int | None, as_json: bool) -> None:
     """Read FILE weights-only (a file that holds code is refused), infer its architecture from its
     tensors, map every key and register it; `predict --checkpoint imported:NAME` then runs it (a Depth
     Anything V2 file: `depth IMAGE --checkpoint imported:NAME`). Nothing is downloaded: each project's
     README says where its files are. A RAFT-Stereo file whose tensors show none of the published layouts
     is refused unless the flags its tensors cannot settle are given (the refusal names them); so is a
-    Selective-RAFT file's, whose only unsettled options are the correlation's levels and radius."""
+    Selective-RAFT file's, whose only unsettled options are the correlation's levels and radius, and a
+    Selective-IGEV file without --max-disp (its cost volume's span, which no tensor holds)."""
     given = {"context_norm": context_norm, "slow_fast_gru": slow_fast, "corr_levels": corr_levels,
-             "corr_radius": corr_radius, "iterations": iters}
-    flags = None
-    if any(value is not None for value in given.values()):
-        from model.raft_import import Flags
-
-        flags = Flags(**given)
+             "corr_radius": corr_radius, "max_disp": max_disp, "iterations": iters}
     with service_errors():
         result = registry.import_checkpoint(state.settings, file, source=source, name=name, replace=replace,
-                                            flags=flags)
+                                            flags=given)
     if as_json:
         click.echo(json.dumps(result, indent=2))
         return
@@ -70,6 +72,13 @@ def import_checkpoint(state: CliState, file: Path, source: str, name: str | None
                    f"{arch['iterations']} iterations by default, {result['keys_loaded']} tensors loaded "
                    f"({result['tensors_in_file']} in the file: {result['duplicates']} duplicates, "
                    f"{len(result['unused'])} never used by Selective-RAFT at this architecture)")
+        return
+    if source == "selective-igev":
+        click.echo(f"{result['checkpoint']}: Selective-IGEV, {arch['n_gru_layers']} selective GRU levels, "
+                   f"max_disp {arch['max_disp']} px, corr {arch['corr_levels']} levels × radius {arch['corr_radius']}, "
+                   f"{arch['iterations']} iterations by default, {result['keys_loaded']} tensors loaded "
+                   f"({result['tensors_in_file']} in the file: {result['duplicates']} duplicates, "
+                   f"{len(result['unused'])} never run in test mode)")
         return
     click.echo(f"{result['checkpoint']}: RAFT-Stereo ({arch['published'] or 'a layout none of the published files has'}"
                f"), n_downsample {arch['n_downsample']}, {arch['gru_levels']} GRU levels of {arch['hidden']}, "
