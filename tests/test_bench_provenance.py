@@ -130,8 +130,11 @@ def test_bench_pretrain_records_what_rebuilds_its_trunk(tmp_path: Path, monkeypa
     rt = SimpleNamespace(sessions=Sessions, close=lambda: None)
     digests: list[tuple[tuple[int, ...], int]] = []
     saved: dict = {}
-    monkeypatch.setattr(fusion, "bench_workspace", lambda _home, _data: (rt, None))
-    monkeypatch.setattr(fusion, "import_captures", lambda _rt, _seeds, _frames: {"mirror_fooling_px": {}})
+    homes: list[Path] = []
+    monkeypatch.setattr(fusion, "bench_workspace", lambda home, _data: homes.append(home) or (rt, None))
+    truths: list[str] = []
+    monkeypatch.setattr(fusion, "import_captures",
+                        lambda _rt, _seeds, _frames, truth: truths.append(truth) or {"mirror_fooling_px": {}})
     monkeypatch.setattr(fusion, "finish_workspace", lambda _home, _data, conditions: conditions)
     monkeypatch.setattr(fusion, "launch_run", lambda *_a, **_k: 7)
     monkeypatch.setattr(fusion, "run_jobs", lambda *_a, **_k: None)
@@ -140,7 +143,7 @@ def test_bench_pretrain_records_what_rebuilds_its_trunk(tmp_path: Path, monkeypa
     monkeypatch.setattr(fusion, "condition_values", lambda _samples: {})
     monkeypatch.setattr(fusion, "condition_ranges", lambda _values: {})
     monkeypatch.setattr(provenance, "pretrain_data_digest",
-                        lambda seeds, frames: digests.append((tuple(seeds), frames)) or "ab" * 32)
+                        lambda seeds, frames, truth: digests.append((tuple(seeds), frames)) or "ab" * 32)
     paths: list[Path] = []
     monkeypatch.setattr(pretrain, "save_trunk",
                         lambda _ckpt, path, recipe: paths.append(path) or saved.update(recipe) or {"sha256": "x"})
@@ -155,6 +158,11 @@ def test_bench_pretrain_records_what_rebuilds_its_trunk(tmp_path: Path, monkeypa
     pretrain.run_pretrain(tmp_path, videos=3, frames=2, steps=5, stereo_only=True)
     assert paths == [tmp_path / "pretrain" / "trunk.safetensors", tmp_path / "pretrain" / "trunk-stereo-only.safetensors"]
     assert saved["resolved_config"]["model"]["use_mono"] is False and saved["command"].endswith("--stereo-only")
+    # on the matcher's truth: a workspace and a trunk of its own, its data hashed with that truth
+    pretrain.run_pretrain(tmp_path, videos=3, frames=2, steps=5, stereo_only=True, truth="matcher")
+    assert paths[-1] == tmp_path / "pretrain" / "trunk-stereo-only-matcher.safetensors"
+    assert homes[-1] == tmp_path / "pretrain" / "workspace-matcher" and truths[-1] == "matcher"
+    assert saved["data"]["truth"] == "matcher" and saved["command"].endswith("--stereo-only --truth matcher")
     trunk = fusion.Trunk({}, "x", {"overrides": saved["overrides"]}, "trunk-stereo-only.safetensors")
     assert fusion.trunk_network(trunk) is fusion.ABLATIONS[1]
     assert fusion.trunk_network(fusion.Trunk({}, "x", {"overrides": {}}, "t")) is fusion.TRUNK_AT_0
