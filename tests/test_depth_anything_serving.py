@@ -49,6 +49,7 @@ def test_an_unknown_import_blocks_samples_and_the_train_worker(tmp_path: Path) -
     from dataset.services.sample_blockers import sample_blocker
     from model.presets import load_preset
     from model.runs.handlers import preflight
+    from model.runs.schema import backbone_dirs
     from tests.conftest import make_settings
 
     home = tmp_path / "ws"
@@ -62,8 +63,12 @@ def test_an_unknown_import_blocks_samples_and_the_train_worker(tmp_path: Path) -
     with pytest.raises(FieldError, match="depth_model_path imported:nope: no imported depth model 'nope'") as refused:
         preflight(load_preset("paper"), {"nproc": 1, "devices": "cpu"}, tmp_path, settings)
     assert refused.value.field == "preset"
-    assert sample_blocker(make_settings(home, depth_backend="depth-anything-v2", depth_model_path="imported:da-s"),
-                          None) is None
+    known = make_settings(home, depth_backend="depth-anything-v2", depth_model_path="imported:da-s",
+                          vlm_model_path=str(tmp_path / "qwen"))
+    assert sample_blocker(known, None) is None
+    # what the launch's memory estimate, other nodes and the engine get: this workspace's directory
+    assert backbone_dirs(load_preset("paper"), known) == {"mono_model_path": str(home / IMPORTED / "da-s"),
+                                                          "vlm_model_path": str(tmp_path / "qwen")}
 
 
 # --- the golden vits fixture, imported as a user imports it -------------------------------------------

@@ -20,7 +20,6 @@ from typing import Any
 from sqlalchemy.orm import Session
 
 from dataset.db import transaction
-from dataset.imported import depth_model_dir
 from dataset.run_layout import PROGRESS_FILE
 from dataset.services import training
 from dataset.services.errors import FieldError, InvalidInput, ServiceError
@@ -158,11 +157,6 @@ def preflight(config: Config, launch: Mapping[str, Any], run_dir: Path, settings
     backbone whose setting is not set or names no directory, the machine (``check_worker``), an
     init checkpoint the engine could not start from (promote's checks, and the model config)."""
     backbones = backbone_dirs(config, settings)
-    if "mono_model_path" in backbones:  # depth_model_path may name an import: this worker's imported directory
-        try:
-            backbones["mono_model_path"] = str(depth_model_dir(settings))
-        except ServiceError as exc:
-            raise FieldError("preset", str(exc)) from None
     for field, weights, setting in BACKBONES:
         if field in backbones and not Path(backbones[field]).is_dir():
             raise FieldError("preset", f"the setting {setting} names no directory here (the {weights} weights)")
