@@ -110,7 +110,7 @@ def test_generation_runs_the_import_the_depth_command_runs(runtime, imported_hom
 
     from core.formats import read_pfm, write_rgb
     from dataset.samples import load_outputs
-    from dataset.tables import Sample
+    from dataset.tables import Job, Sample
     from tests.test_generate import generate_all, prepare
     from webapp.cli import main
 
@@ -119,7 +119,7 @@ def test_generation_runs_the_import_the_depth_command_runs(runtime, imported_hom
     generate_all(runtime)
     with runtime.sessions() as s:
         sample = s.scalar(select(Sample))
-        assert sample is not None, "no sample generated"
+        assert sample is not None, [job.error for job in s.scalars(select(Job))]
         provenance = dict(sample.provenance)
     assert provenance["depth_backend"] == "depth-anything-v2" and provenance["simulated"] is False
     assert provenance["depth_model_id"].startswith("depth-anything-v2:da-s:")
