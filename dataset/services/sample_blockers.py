@@ -37,7 +37,7 @@ def sample_blocker(settings: Settings, video: Video | None, frame: Frame | None 
     if settings.depth_backend == "depth-anything-v2":
         if settings.depth_model_path is None:
             return ("depth_backend is depth-anything-v2 but depth_model_path is not set: set it to a local "
-                    "Depth Anything V2 checkpoint directory")
+                    "Depth Anything V2 checkpoint directory or imported:NAME")
         try:
             depth_model_dir(settings)  # an imported:NAME that names nothing blocks every frame
         except ServiceError as exc:

@@ -14,7 +14,8 @@ from webapp.cli.errors import service_errors
 from webapp.cli.state import CliState, pass_state
 
 _NO_MODEL = ("no --checkpoint given and this workspace has no depth model (depth_backend = \"depth-anything-v2\" "
-             "and depth_model_path = \"DIR\" in its illusion-studio.toml); pass --checkpoint imported:NAME or DIR")
+             "and depth_model_path = \"DIR\" or \"imported:NAME\" in its illusion-studio.toml); "
+             "pass --checkpoint imported:NAME or DIR")
 
 
 @click.command("depth")

@@ -19,7 +19,8 @@ _NO_MODEL = ("no --checkpoint given and this workspace has no current model "
              "(promote a run on the Models page or pass --checkpoint)")
 _NO_MONO = ("this model takes the left view's monocular disparity and none is at hand: pass --mono FILE "
             "(.pfm, .npy or the authors' .png), or give the workspace a depth model directory, "
-            "depth_backend = \"depth-anything-v2\" and depth_model_path = \"DIR\" in its illusion-studio.toml")
+            "depth_backend = \"depth-anything-v2\" and depth_model_path = \"DIR\" (or \"imported:NAME\") in its "
+            "illusion-studio.toml")
 
 
 @click.command("predict")
