@@ -65,7 +65,8 @@ class DepthAnythingMono(nn.Module):
 
     def __init__(self, config: ModelConfig) -> None:
         super().__init__()
-        from annotation.depth.depth_anything import load_depth_anything
+        from annotation.depth.depth_anything import load_depth_anything, use_original_positions
+        from annotation.depth.depth_anything_import import imported_source
 
         if not config.mono_model_path:
             raise ValueError("mono backend 'depth-anything-v2' needs model.mono_model_path (a local checkpoint dir)")
@@ -74,6 +75,13 @@ class DepthAnythingMono(nn.Module):
             raise ValueError(f"model.mono_model_path {path} is not a directory")
         self.backbone, processor, self.model_id = load_depth_anything(path, "cpu")
         self.backbone.requires_grad_(False)
+        # Weights converted from an original .pth learnt DINOv2's own position-grid interpolation: keep it
+        # (a property of the network). The image still enters as below, batched on the device
+        # (docs/depth-anything.md, "Serving generation and the paper preset").
+        source = imported_source(path)
+        self.original_positions = bool(source and source.get("pipeline") == "original")
+        if self.original_positions:
+            use_original_positions(self.backbone)
         self.model_path = path
         self.factor = 2**config.n_downsample
         self.patch = int(self.backbone.config.patch_size)

@@ -66,3 +66,23 @@ def load_fixture(name: str = "vits") -> dict[str, Any]:
 def fixture_state(fixture: dict[str, Any]) -> dict[str, torch.Tensor]:
     """The fixture's weights, keys as in an original file."""
     return original_state([(key, shape) for key, shape in fixture["keys"]], fixture["seed"])
+
+
+def import_golden(home: Path, name: str, fixture: dict[str, Any], state: dict[str, torch.Tensor] | None = None) -> dict[str, Any]:
+    """Import the fixture's weights into workspace ``home`` as ``imported:NAME`` the way a user does
+    (an original-layout ``.pth`` through `checkpoints import --from depth-anything-v2`); the command's
+    JSON answer. The ``.pth`` (100 MB for vits) is deleted once imported."""
+    from click.testing import CliRunner
+
+    from webapp.cli import main
+
+    home.mkdir(parents=True, exist_ok=True)
+    original = home.parent / f"depth_anything_v2_{fixture['encoder']}.pth"
+    torch.save(fixture_state(fixture) if state is None else state, original)
+    try:
+        result = CliRunner().invoke(main, ["--data-dir", str(home), "checkpoints", "import", "--from",
+                                           "depth-anything-v2", str(original), "--name", name, "--json"])
+    finally:
+        original.unlink()
+    assert result.exit_code == 0, result.output
+    return json.loads(result.output)

@@ -25,7 +25,7 @@ from annotation.depth.depth_anything_import import (  # noqa: E402
     to_transformers,
 )
 from core.formats import read_pfm, read_rgb  # noqa: E402
-from tests.depth_anything_golden import fixture_state, load_fixture  # noqa: E402
+from tests.depth_anything_golden import fixture_state, import_golden, load_fixture  # noqa: E402
 from webapp.cli import main  # noqa: E402
 
 QKV_TENSORS = 2 * 12  # vits: each block's fused qkv weight and bias become three tensors each
@@ -48,15 +48,8 @@ def state(fixture: dict) -> dict[str, torch.Tensor]:
 @pytest.fixture(scope="module")
 def imported(tmp_path_factory: pytest.TempPathFactory, state: dict[str, torch.Tensor]) -> tuple[Path, dict]:
     """A workspace with the fixture's weights imported from an original-layout file, and the answer."""
-    root = tmp_path_factory.mktemp("da-import")
-    home = root / "ws"
-    home.mkdir()
-    original = root / "depth_anything_v2_vits.pth"
-    torch.save(state, original)
-    result = _cli(home, "checkpoints", "import", "--from", "depth-anything-v2", str(original), "--name", "da-s", "--json")
-    assert result.exit_code == 0, result.output
-    original.unlink()  # 100 MB
-    return home, json.loads(result.output)
+    home = tmp_path_factory.mktemp("da-import") / "ws"
+    return home, import_golden(home, "da-s", load_fixture("vits"), state)
 
 
 @pytest.mark.slow

@@ -30,6 +30,7 @@ from core.geometry import (
 )
 from dataset.db import transaction
 from dataset.finite import finite_json
+from dataset.imported import depth_model_dir
 from dataset.media import MediaStore
 from dataset.samples import load_output, mask_name, store_outputs
 from dataset.services.errors import Conflict, InvalidInput, NotFound
@@ -78,7 +79,8 @@ def mono_disparity(settings: Settings, media: MediaStore, frame: Frame, video: V
     if settings.depth_backend == "depth-anything-v2":
         if settings.depth_model_path is None:
             raise GenerationError("depth_backend is depth-anything-v2 but depth_model_path is not set")
-        model = _depth_model(str(settings.depth_model_path), settings.device)
+        # depth_model_path may name an import (imported:NAME): the same directory `depth --checkpoint` runs
+        model = _depth_model(str(depth_model_dir(settings)), settings.device)
         cache_key = f"mono:{model.model_id}"
         if cache_key in assets:
             disparity = load_output(media, assets[cache_key], "disparity_mono")

@@ -16,7 +16,9 @@ from typing import Any
 from sqlalchemy import Select, func, select
 from sqlalchemy.orm import Session
 
+from dataset.imported import depth_model_dir
 from dataset.redact import redacted
+from dataset.services.errors import ServiceError
 from dataset.settings import Settings
 from dataset.tables import Annotation, Frame, FrameState, Job, JobState, Video
 
@@ -35,7 +37,11 @@ def sample_blocker(settings: Settings, video: Video | None, frame: Frame | None 
     if settings.depth_backend == "depth-anything-v2":
         if settings.depth_model_path is None:
             return ("depth_backend is depth-anything-v2 but depth_model_path is not set: set it to a local "
-                    "Depth Anything V2 checkpoint directory")
+                    "Depth Anything V2 checkpoint directory or imported:NAME")
+        try:
+            depth_model_dir(settings)  # an imported:NAME that names nothing blocks every frame
+        except ServiceError as exc:
+            return str(exc)
         return None
     if _own_depth(video, frame):
         return None

@@ -34,6 +34,7 @@ from sqlalchemy.orm import Session
 
 from core.atomic import atomic_write_bytes
 from dataset.contained import LinkedFolder, open_contained
+from dataset.imported import IMPORTED, imported_depth_model, imported_model_dir, imported_names, imported_path
 from dataset.run_layout import RUN_FILE
 from dataset.services import training
 from dataset.services.errors import Conflict, InvalidInput, NotFound
@@ -41,9 +42,6 @@ from model.train import BEST_NAME, CHECKPOINT_DIR, KEEP_FILE
 
 CURRENT = "current.json"
 ALIASES = ("best", "last")
-IMPORTED = "imported"
-IMPORTED_DIR = Path("checkpoints") / IMPORTED  # under the workspace home
-IMPORTED_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
 _RUN_NAME = re.compile(r"(\d+):([^/\\]+)")
 _PINNED = re.compile(r"best_step_\d{7,}\.pt")  # freeze's hard link to best.pt
 NAME_HINT = "RUN:NAME (a run's best, last or checkpoint file, e.g. 3:best) or imported:NAME"
@@ -150,33 +148,6 @@ def checkpoint_name(run: int, file: str) -> str:
     return f"{run}:{file}"
 
 
-def imported_path(home: Path, name: str) -> Path:
-    """Where the imported checkpoint ``name`` lives; InvalidInput for a name that is not one."""
-    if not IMPORTED_NAME.fullmatch(name):
-        raise InvalidInput(f"imported checkpoint name {name!r}: use 1–64 letters, digits, '.', '_' or '-', "
-                           "starting with a letter or digit")
-    return Path(home) / IMPORTED_DIR / f"{name}.pt"
-
-
-def imported_model_dir(home: Path, name: str) -> Path:
-    """Where the imported depth model ``name`` (a ``transformers`` directory) lives; InvalidInput for a
-    name that is not one."""
-    return imported_path(home, name).with_suffix("")
-
-
-def imported_names(home: Path, *, depth_models: bool = False) -> list[str]:
-    """The workspace's imported checkpoints (``depth_models``: its imported depth-model directories), by
-    name (never through a link)."""
-    folder = Path(home) / IMPORTED_DIR
-    if not folder.is_dir() or folder.is_symlink():
-        return []
-    if depth_models:
-        return sorted(p.name for p in folder.iterdir() if p.is_dir() and not p.is_symlink()
-                      and IMPORTED_NAME.fullmatch(p.name) and (p / "config.json").is_file())
-    return sorted(p.stem for p in folder.glob("*.pt") if p.is_file() and not p.is_symlink()
-                  and IMPORTED_NAME.fullmatch(p.stem))
-
-
 def is_name(text: str) -> bool:
     """Whether ``text`` is a checkpoint name (``RUN:NAME`` or ``imported:NAME``) rather than a path."""
     return text.startswith(f"{IMPORTED}:") or _RUN_NAME.fullmatch(text) is not None
@@ -221,12 +192,7 @@ def resolve_depth_model(settings: Any | None, text: str) -> ResolvedCheckpoint:
         return ResolvedCheckpoint(Path(text).expanduser(), Path(text).name)
     if settings is None:
         raise InvalidInput(f"checkpoint {text!r} is a name: naming a checkpoint needs a workspace (--data-dir)")
-    name = text.split(":", 1)[1]
-    path = imported_model_dir(Path(settings.home), name)
-    if name not in imported_names(Path(settings.home), depth_models=True):
-        have = ", ".join(f"{IMPORTED}:{n}" for n in imported_names(Path(settings.home), depth_models=True)) or "none"
-        raise NotFound(f"no imported depth model {name!r} (imported: {have}; `illusion-studio checkpoints import "
-                       "--from depth-anything-v2 FILE` adds one)")
+    path = imported_depth_model(Path(settings.home), text.split(":", 1)[1])
     return ResolvedCheckpoint(path, text)
 
 

@@ -28,8 +28,9 @@ from pydantic import (
 )
 
 from dataset.export.splits import MIN_FRACTION
+from dataset.imported import depth_model_dir
 from dataset.readers import READER_FORMATS
-from dataset.services.errors import FieldError, InvalidInput
+from dataset.services.errors import FieldError, InvalidInput, ServiceError
 from dataset.services.training import DEFAULT_SPLIT, SAMPLE_KINDS, parse_split
 from dataset.services.validate import DB_INT_MAX
 from dataset.settings import DATASET_ROOT_NAME
@@ -142,8 +143,9 @@ def _settings(info: ValidationInfo) -> Any:
 
 def backbone_dirs(config: Config, settings: Any) -> dict[str, str]:
     """The directories of the frozen backbones ``config``'s model loads, by config field, from
-    ``settings`` (``depth_model_path``, ``vlm_model_path``); FieldError on ``preset`` naming the first
-    setting that is not set. Whether each is a directory is the train worker's check, on its own."""
+    ``settings`` (``depth_model_path``, ``vlm_model_path``; an ``imported:NAME`` depth model resolved to
+        its directory); FieldError on ``preset`` naming the first setting that is not set or names no import.
+    Whether each is a directory is the train worker's check, on its own."""
     model = config.model
     loads = {"mono_model_path": model.mono_backend == "depth-anything-v2",
              "vlm_model_path": model.use_vlm and model.vlm_backend == "qwen2-vl"}
@@ -154,6 +156,11 @@ def backbone_dirs(config: Config, settings: Any) -> dict[str, str]:
             if not directory:
                 raise FieldError("preset", f"{config.preset} loads {weights} weights from the directory the setting "
                                            f"{setting} names, and it is not set")
+            if setting == "depth_model_path":  # may name an import: imported:NAME, this workspace's directory
+                try:
+                    directory = depth_model_dir(settings)
+                except ServiceError as exc:
+                    raise FieldError("preset", str(exc)) from None
             found[field] = str(directory)
     return found
 

@@ -8,12 +8,14 @@ import click
 import numpy as np
 
 from core.formats import FormatError, read_rgb, write_pfm
+from dataset.imported import depth_model_dir
 from model.runs import registry
 from webapp.cli.errors import service_errors
 from webapp.cli.state import CliState, pass_state
 
 _NO_MODEL = ("no --checkpoint given and this workspace has no depth model (depth_backend = \"depth-anything-v2\" "
-             "and depth_model_path = \"DIR\" in its illusion-studio.toml); pass --checkpoint imported:NAME or DIR")
+             "and depth_model_path = \"DIR\" or \"imported:NAME\" in its illusion-studio.toml); "
+             "pass --checkpoint imported:NAME or DIR")
 
 
 @click.command("depth")
@@ -33,7 +35,8 @@ def depth(state: CliState, image: Path, checkpoint: str | None, out: Path, devic
     if checkpoint is None:
         if state.data_dir is None or state.settings.depth_backend != "depth-anything-v2":
             raise click.ClickException(_NO_MODEL)
-        path = state.settings.depth_model_path  # unset: the backend says it needs one
+        with service_errors():  # unset: the backend says it needs one
+            path = depth_model_dir(state.settings)
     else:
         settings = state.settings if checkpoint.startswith(f"{registry.IMPORTED}:") else None
         with service_errors():

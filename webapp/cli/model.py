@@ -8,6 +8,7 @@ import click
 import numpy as np
 
 from core.formats import FormatError, read_map, read_rgb, write_pfm, write_rgb
+from dataset.imported import depth_model_dir
 from dataset.preview.images import add_colorbar, colorize, value_range
 from model.runs import registry
 from webapp.cli.errors import service_errors
@@ -18,7 +19,8 @@ _NO_MODEL = ("no --checkpoint given and this workspace has no current model "
              "(promote a run on the Models page or pass --checkpoint)")
 _NO_MONO = ("this model takes the left view's monocular disparity and none is at hand: pass --mono FILE "
             "(.pfm, .npy or the authors' .png), or give the workspace a depth model directory, "
-            "depth_backend = \"depth-anything-v2\" and depth_model_path = \"DIR\" in its illusion-studio.toml")
+            "depth_backend = \"depth-anything-v2\" and depth_model_path = \"DIR\" (or \"imported:NAME\") in its "
+            "illusion-studio.toml")
 
 
 @click.command("predict")
@@ -102,8 +104,9 @@ def _estimate_mono(state: CliState, left: np.ndarray, device: str) -> np.ndarray
         raise click.ClickException(_NO_MONO)
     from annotation.depth import make_depth_backend
 
-    settings = state.settings
-    return make_depth_backend(settings.depth_backend, model_path=settings.depth_model_path, device=device).estimate(left)
+    with service_errors():
+        model_path = depth_model_dir(state.settings)
+    return make_depth_backend(state.settings.depth_backend, model_path=model_path, device=device).estimate(left)
 
 
 def _preview(disparity: np.ndarray) -> np.ndarray:
