@@ -27,7 +27,8 @@ FIXTURES = Path(__file__).parent / "fixtures" / "raft_stereo"
 HEAD_GAIN = 0.1
 
 
-def _canonical(name: str) -> str:
+def shared_key(name: str) -> str:
+    """The key whose values ``name`` shares: a residual block's ``norm3`` is its ``downsample.1``."""
     return name.replace(".norm3.", ".downsample.1.")
 
 
@@ -46,7 +47,7 @@ def raft_state(keys: Sequence[tuple[str, Sequence[int]]], seed: int, *, head: st
 
     state = {}
     for name, shape in keys:
-        canonical = _canonical(name)
+        canonical = shared_key(name)
         if canonical not in values:
             leaf = canonical.rsplit(".", 1)[-1]
             if leaf == "num_batches_tracked":

@@ -13,7 +13,6 @@ Only torch is needed: the project holds none of Selective-IGEV's code.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -21,11 +20,10 @@ from typing import Any
 import numpy as np
 import torch
 
+from tests import raft_golden
+from tests.raft_golden import shared_key
+
 FIXTURES = Path(__file__).parent / "fixtures" / "selective_igev"
-
-
-def _canonical(name: str) -> str:
-    return name.replace(".norm3.", ".downsample.1.")
 
 
 def igev_state(keys: Sequence[tuple[str, Sequence[int]]], seed: int) -> dict[str, torch.Tensor]:
@@ -38,7 +36,7 @@ def igev_state(keys: Sequence[tuple[str, Sequence[int]]], seed: int) -> dict[str
 
     state = {}
     for name, shape in keys:
-        canonical = _canonical(name)
+        canonical = shared_key(name)
         if canonical not in values:
             leaf = canonical.rsplit(".", 1)[-1]
             if leaf == "num_batches_tracked":
@@ -66,11 +64,7 @@ def igev_state(keys: Sequence[tuple[str, Sequence[int]]], seed: int) -> dict[str
 def load_fixture(name: str) -> dict[str, Any]:
     """The fixture ``name``: its JSON (flags, seed, keys, iterations, crop) with the npz arrays (``left``,
     ``right`` uint8 H×W×3, ``disparity`` float32 H×W, the reference's output) added."""
-    with open(FIXTURES / f"{name}.json", encoding="utf-8") as handle:
-        fixture = json.load(handle)
-    with np.load(FIXTURES / f"{name}.npz") as arrays:
-        fixture.update({key: arrays[key] for key in arrays.files})
-    return fixture
+    return raft_golden.load_fixture(name, FIXTURES)
 
 
 def fixture_state(fixture: dict[str, Any]) -> dict[str, torch.Tensor]:
