@@ -12,6 +12,7 @@ import torch.nn.functional as F
 
 from model.network import FusionNetwork
 from model.presets import Config
+from model.stereo.inputs import centred_padding, check_pair
 
 
 @dataclass
@@ -33,18 +34,13 @@ class Predictor:
                 iters: int | None = None, seed: int = 0) -> Prediction:
         """``left``/``right`` RGB uint8 H×W×3 of one size; ``mono`` float32 relative disparity of any
         size (resized, values kept). ``seed`` seeds the flow's noise. ValueError for bad inputs."""
-        for name, image in (("left", left), ("right", right)):
-            if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
-                raise ValueError(f"{name} image must be RGB uint8 H×W×3, got {image.dtype} {image.shape}")
-        if left.shape != right.shape:
-            raise ValueError(f"left and right images differ in size: {left.shape[:2]} vs {right.shape[:2]}")
+        check_pair(left, right)
         full_height, full_width = left.shape[:2]
         left, right = self._shrunk(left), self._shrunk(right)
         height, width = left.shape[:2]
         multiple, centred = self.config.model.inference_padding
-        pad_h, pad_w = -height % multiple, -width % multiple
-        top, left_pad = (pad_h // 2, pad_w // 2) if centred else (0, 0)
-        padding = (left_pad, pad_w - left_pad, top, pad_h - top)
+        padding = centred_padding(height, width, multiple) if centred else (0, -width % multiple, 0, -height % multiple)
+        left_pad, top = padding[0], padding[2]
 
         def tensor(image: np.ndarray) -> torch.Tensor:
             t = torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None].float().to(self.device)

@@ -15,7 +15,8 @@ zeros, as RAFT-Stereo does.
 
 The encoders' key map (:func:`encoder_prefixes`), the loader (:func:`load_mapped`) and the writer
 (:func:`import_file`) serve the networks built on RAFT-Stereo's encoders too
-(model/selective_raft_import.py).
+(model/selective_raft_import.py); the loader's core (:func:`load_keyed`, any key map) Selective-IGEV's
+(model/selective_igev_import.py).
 
 Two kinds of the file's tensors have no place of their own: RAFT-Stereo's residual blocks hold their
 shortcut's norm twice (``norm3`` and ``downsample.1``, one module), and with fewer than 3 GRU levels
@@ -164,14 +165,8 @@ def infer_architecture(state: Mapping[str, Tensor], flags: Flags = Flags()) -> d
     NotRaftStereo naming what is missing, what contradicts the tensors, or the flags to give."""
     required = ["update_block.mask.2.weight", "context_zqr_convs.0.weight", "cnet.conv1.weight",
                 "update_block.encoder.convc1.weight"]
-    missing = [key for key in required if key not in state]
-    if missing:
-        raise NotRaftStereo(f"not a RAFT-Stereo checkpoint: no {', '.join(missing)} "
-                            f"(it has {len(state)} tensors{', e.g. ' + next(iter(state)) if state else ''})")
-    rows = state["update_block.mask.2.weight"].shape[0]
-    factor = round((rows / 9) ** 0.5)
-    if 9 * factor * factor != rows or factor not in (4, 8):
-        raise NotRaftStereo(f"update_block.mask.2.weight has {rows} rows: not 9·f² for n_downsample 2 (144) or 3 (576)")
+    require(state, required, NotRaftStereo, "RAFT-Stereo")
+    factor = mask_factor(state, NotRaftStereo)
     levels = sum(1 for key in state if re.fullmatch(r"context_zqr_convs\.\d\.weight", key))
     if levels not in (1, 2, 3):
         raise NotRaftStereo(f"{levels} context_zqr_convs: RAFT-Stereo has 1 to 3 GRU levels")
@@ -194,6 +189,24 @@ def infer_architecture(state: Mapping[str, Tensor], flags: Flags = Flags()) -> d
             "context_norm": norm, "slow_fast_gru": slow_fast, "corr_levels": corr[0], "corr_radius": corr[1],
             "feature_dim": feature_dim, "iterations": iterations, "published": published[0] if published else None,
             "given": given}
+
+
+def require(state: Mapping[str, Any], required: list[str], error: type[NotImportable], name: str) -> None:
+    """``error`` naming the ``required`` keys that ``state`` lacks: not a checkpoint of ``name``."""
+    missing = [key for key in required if key not in state]
+    if missing:
+        raise error(f"not a {name} checkpoint: no {', '.join(missing)} "
+                    f"(it has {len(state)} tensors{', e.g. ' + next(iter(state)) if state else ''})")
+
+
+def mask_factor(state: Mapping[str, Tensor], error: type[NotImportable], note: str = "") -> int:
+    """The upsampling factor f (4 or 8: n_downsample 2 or 3) of the mask head's 9·f² rows; ``error``
+    (its message ending in ``note``) for another count."""
+    rows = state["update_block.mask.2.weight"].shape[0]
+    factor = round((rows / 9) ** 0.5)
+    if 9 * factor * factor != rows or factor not in (4, 8):
+        raise error(f"update_block.mask.2.weight has {rows} rows: not 9·f² for n_downsample 2 (144) or 3 (576){note}")
+    return factor
 
 
 def _unsettled(tensors: str, planes: int, published: tuple[str, str, bool, int] | None,
@@ -242,32 +255,51 @@ def load_mapped(state: Mapping[str, Tensor], config: Config, prefixes: list[tupl
     Returns (the network in eval mode, ``norm3`` duplicates skipped, keys the file's own code never runs
     at this architecture); ``error`` (naming the network ``name``) for an unknown, missing, misshapen
     or non-finite tensor."""
+    return load_keyed(state, config, error, name, to_ours=lambda key: to_ours(key, prefixes),
+                      to_theirs=lambda key: to_theirs(key, prefixes),
+                      never_run=lambda key, target: target is not None and _never_run(target, levels))
+
+
+def load_keyed(state: Mapping[str, Tensor], config: Config, error: type[NotImportable], name: str, *,
+               to_ours: Callable[[str], str | None], to_theirs: Callable[[str], str],
+               never_run: Callable[[str, str | None], bool],
+               equal_duplicates: bool = False) -> tuple[FusionNetwork, int, list[str]]:
+    """The network of ``config`` with every tensor of ``state`` (a file's, ``module.`` stripped) in its
+    place under the stereo branch: ``to_ours`` (the file's key → the branch's, None where it has none),
+    ``to_theirs`` (back, for messages), ``never_run`` (the file's key and ours: one its own code never
+    runs at this architecture); a ``norm3`` tensor is skipped for its block's ``downsample.1`` (with
+    ``equal_duplicates``, ``error`` if the two differ). Returns (the network in eval mode, duplicates
+    skipped, the never-run keys); ``error`` (naming the network ``name``) for an unknown, missing,
+    misshapen or non-finite tensor."""
     network = FusionNetwork(config.model)
-    expected = network.state_dict()
+    expected = network.stereo_branch.state_dict()
     mapped: dict[str, Tensor] = {}
     unknown, unused, duplicates = [], [], 0
     for key, tensor in state.items():
         if _DUPLICATE.search(key) and _DUPLICATE.sub(".downsample.1.", key) in state:
+            if equal_duplicates and not torch.equal(tensor, state[_DUPLICATE.sub(".downsample.1.", key)]):
+                raise error(f"{key} differs from its block's downsample.1 (one module in the reference)")
             duplicates += 1
             continue
-        target = to_ours(key, prefixes)
-        if target is not None and PREFIX + target in expected:
-            mapped[PREFIX + target] = tensor
-        elif target is not None and _never_run(target, levels):
+        target = to_ours(key)
+        if target is not None and target in expected:
+            mapped[target] = tensor
+        elif never_run(key, target):
             unused.append(key)
         else:
             unknown.append(key)
-    missing = [to_theirs(key.removeprefix(PREFIX), prefixes) for key in expected if key not in mapped]
+    missing = [to_theirs(key) for key in expected if key not in mapped]
     if unknown or missing:
         parts = ([f"unknown {_few(unknown)}"] if unknown else []) + ([f"missing {_few(missing)}"] if missing else [])
         raise error(f"not the {name} layout its tensors suggest: {'; '.join(parts)}")
     for key, tensor in mapped.items():
-        theirs = to_theirs(key.removeprefix(PREFIX), prefixes)
+        theirs = to_theirs(key)
         if tuple(tensor.shape) != tuple(expected[key].shape):
             raise error(f"{theirs} has shape {tuple(tensor.shape)}, expected {tuple(expected[key].shape)}")
         if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all()):
             raise error(f"{theirs} holds values that are not finite")
-    network.load_state_dict(mapped, strict=True)  # copied into the network's float32 parameters
+    # Copied into the network's float32 parameters: a half file is upcast.
+    network.load_state_dict({PREFIX + key: tensor for key, tensor in mapped.items()}, strict=True)
     return network.eval(), duplicates, unused
 
 

@@ -22,18 +22,16 @@ exist but never run in test mode. A half-precision file is upcast to float32 (th
 
 from __future__ import annotations
 
-import re
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
-import torch
 from torch import Tensor
 
 from model.network import FusionNetwork
 from model.presets import Config, load_preset
-from model.raft_import import Conversion, NotImportable, tensors_only
+from model.raft_import import Conversion, NotImportable, load_keyed, require, tensors_only
 from model.stereo.selective_igev import DEMO_ITERATIONS, GROUPS, HIDDEN
 
 SOURCE = "selective-igev"
@@ -41,7 +39,6 @@ CORR_LEVELS, CORR_RADIUS = 2, 4  # every published file's: 2 × 9 × 9 = 162 pla
 _PUBLISHED_PLANES = CORR_LEVELS * (GROUPS + 1) * (2 * CORR_RADIUS + 1)
 _MAX_DISP_HINT = "--max-disp 192 (the reference's default: its SceneFlow, KITTI and ETH3D files) or 768 (its " \
                  "middlebury_finetune file, as its README runs it)"
-_DUPLICATE = re.compile(r"\.norm3\.")
 _TRAINING_ONLY = ("spx.", "spx_2.", "spx_4.")
 
 
@@ -62,7 +59,6 @@ class Flags:
 
 
 FLAGS = tuple(flag.name for flag in fields(Flags))  # a Selective-IGEV file may need any of them
-PREFIX = "stereo_branch."  # where the selective-igev network keeps Selective-IGEV
 
 
 def _prefixes() -> list[tuple[str, str]]:
@@ -80,24 +76,27 @@ def _prefixes() -> list[tuple[str, str]]:
 
 
 _PREFIXES = _prefixes()
+_BACK = [(ours, theirs) for theirs, ours in _PREFIXES]  # the same pairs, ours → the reference's, in that order
+
+
+def _renamed(key: str, prefixes: list[tuple[str, str]], shortcut: tuple[str, str]) -> str:
+    """``key`` with the first of ``prefixes`` (old, new) it starts with replaced, and in the context
+    encoder its residual blocks' shortcut renamed (``shortcut``: old, new)."""
+    for old, new in prefixes:
+        if key.startswith(old):
+            key = new + key[len(old):]
+            break
+    return key.replace(*shortcut) if key.startswith("cnet.") else key
 
 
 def to_ours(key: str) -> str:
     """The reference's key (``module.`` stripped) → this network's."""
-    for theirs, ours in _PREFIXES:
-        if key.startswith(theirs):
-            key = ours + key[len(theirs):]
-            break
-    return key.replace(".downsample.", ".skip.") if key.startswith("cnet.") else key
+    return _renamed(key, _PREFIXES, (".downsample.", ".skip."))
 
 
 def to_theirs(key: str) -> str:
     """This network's key → the reference's (for messages)."""
-    for theirs, ours in _PREFIXES:
-        if key.startswith(ours):
-            key = theirs + key[len(ours):]
-            break
-    return key.replace(".skip.", ".downsample.") if key.startswith("cnet.") else key
+    return _renamed(key, _BACK, (".skip.", ".downsample."))
 
 
 def _never_run(key: str, levels: int) -> bool:
@@ -115,10 +114,7 @@ def infer_architecture(state: Mapping[str, Tensor], flags: Flags = Flags()) -> d
     what is missing or contradicts the tensors, or the flags to give (module doc)."""
     required = ["feature.conv_stem.weight", "update_block.encoder.convc1.weight", "update_block.gru04.small_gru.convz.weight",
                 "cam.fc.0.weight", "sam.samconv.weight", "cost_agg.conv1_up.conv.weight", "cnet.conv1.weight"]
-    missing = [key for key in required if key not in state]
-    if missing:
-        raise NotSelectiveIGEV(f"not a Selective-IGEV checkpoint: no {', '.join(missing)} "
-                               f"(it has {len(state)} tensors{', e.g. ' + next(iter(state)) if state else ''})")
+    require(state, required, NotSelectiveIGEV, "Selective-IGEV")
     levels = 1 + ("update_block.gru08.small_gru.convz.weight" in state) + ("update_block.gru16.small_gru.convz.weight" in state)
     if levels == 2 and "update_block.gru08.small_gru.convz.weight" not in state:
         raise NotSelectiveIGEV("update_block.gru16 without gru08: not a layout Selective-IGEV builds")
@@ -177,41 +173,11 @@ def convert(state: Mapping[str, Any], flags: Flags = Flags()) -> Conversion:
     state = tensors_only(state, NotSelectiveIGEV)
     arch = infer_architecture(state, flags)
     config = config_for(arch)
-    network = FusionNetwork(config.model)
-    expected = network.stereo_branch.state_dict()
-    mapped: dict[str, Tensor] = {}
-    unknown, unused, duplicates = [], [], 0
-    for key, tensor in state.items():
-        if _DUPLICATE.search(key) and _DUPLICATE.sub(".downsample.1.", key) in state:
-            if not torch.equal(tensor, state[_DUPLICATE.sub(".downsample.1.", key)]):
-                raise NotSelectiveIGEV(f"{key} differs from its block's downsample.1 (one module in the reference)")
-            duplicates += 1
-            continue
-        target = to_ours(key)
-        if target in expected:
-            mapped[target] = tensor
-        elif _never_run(key, arch["n_gru_layers"]):
-            unused.append(key)
-        else:
-            unknown.append(key)
-    missing = [to_theirs(key) for key in expected if key not in mapped]
-    if unknown or missing:
-        parts = ([f"unknown {_few(unknown)}"] if unknown else []) + ([f"missing {_few(missing)}"] if missing else [])
-        raise NotSelectiveIGEV(f"not the Selective-IGEV layout its tensors suggest: {'; '.join(parts)}")
-    for key, tensor in mapped.items():
-        if tuple(tensor.shape) != tuple(expected[key].shape):
-            raise NotSelectiveIGEV(f"{to_theirs(key)} has shape {tuple(tensor.shape)}, "
-                                   f"expected {tuple(expected[key].shape)}")
-        if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all()):
-            raise NotSelectiveIGEV(f"{to_theirs(key)} holds values that are not finite")
-    # Copied into the network's float32 parameters: a half file is upcast.
-    network.load_state_dict({PREFIX + key: tensor for key, tensor in mapped.items()}, strict=True)
-    return Conversion(config, network.eval(), arch, len(state), duplicates, unused)
-
-
-def _few(keys: list[str]) -> str:
-    shown = ", ".join(keys[:3])
-    return shown + (f" and {len(keys) - 3} more" if len(keys) > 3 else "")
+    levels = arch["n_gru_layers"]
+    network, duplicates, unused = load_keyed(state, config, NotSelectiveIGEV, "Selective-IGEV", to_ours=to_ours,
+                                             to_theirs=to_theirs, never_run=lambda key, _: _never_run(key, levels),
+                                             equal_duplicates=True)
+    return Conversion(config, network, arch, len(state), duplicates, unused)
 
 
 def read_published(path: Path) -> dict[str, Any]:

@@ -28,6 +28,8 @@ from model.raft_import import (
     NotImportable,
     encoder_prefixes,
     load_mapped,
+    mask_factor,
+    require,
     tensors_only,
 )
 from model.raft_import import to_theirs as _mapped_back
@@ -70,15 +72,8 @@ def infer_architecture(state: Mapping[str, Any], flags: Flags = Flags()) -> dict
         raise NotSelectiveRaft(f"{', '.join(refused)}: not an option of Selective-RAFT (its code fixes it or never reads it)")
     required = ["update_block.mask.2.weight", "update_block.gru04.small_gru.convz.weight", "sam.samconv.weight",
                 "cam.fc.0.weight", "cnet.conv1.weight", "fnet.conv2.weight", "update_block.encoder.convc1.weight"]
-    missing = [key for key in required if key not in state]
-    if missing:
-        raise NotSelectiveRaft(f"not a Selective-RAFT checkpoint: no {', '.join(missing)} "
-                               f"(it has {len(state)} tensors{', e.g. ' + next(iter(state)) if state else ''})")
-    rows = state["update_block.mask.2.weight"].shape[0]
-    factor = round((rows / 9) ** 0.5)
-    if 9 * factor * factor != rows or factor not in (4, 8):
-        raise NotSelectiveRaft(f"update_block.mask.2.weight has {rows} rows: not 9·f² for n_downsample 2 (144) or "
-                               "3 (576), the ones this network has")
+    require(state, required, NotSelectiveRaft, "Selective-RAFT")
+    factor = mask_factor(state, NotSelectiveRaft, ", the ones this network has")
     present = [name for name in _GRUS if f"update_block.gru{name}.small_gru.convz.weight" in state]
     levels = len(present)
     if present != list(_GRUS[:levels]):

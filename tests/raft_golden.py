@@ -14,7 +14,7 @@ Only torch is needed: the project holds none of RAFT-Stereo's code.
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +27,8 @@ FIXTURES = Path(__file__).parent / "fixtures" / "raft_stereo"
 HEAD_GAIN = 0.1
 
 
-def _canonical(name: str) -> str:
+def shared_key(name: str) -> str:
+    """The key whose values ``name`` shares: a residual block's ``norm3`` is its ``downsample.1``."""
     return name.replace(".norm3.", ".downsample.1.")
 
 
@@ -39,34 +40,42 @@ def raft_state(keys: Sequence[tuple[str, Sequence[int]]], seed: int, *, head: st
     norm far from identity (running means ~N(0, 0.5²), variances log-uniform in [1/4, 4], scales
     ~N(1, 0.3²), shifts ~N(0, 0.2²)), so that a network that skipped or misread them would show."""
     generator = torch.Generator().manual_seed(seed)
-    values: dict[str, torch.Tensor] = {}
 
     def normal(shape: Sequence[int], std: float, mean: float = 0.0) -> torch.Tensor:
         return mean + std * torch.randn(tuple(shape), generator=generator, dtype=torch.float32)
 
+    def value(canonical: str, leaf: str, shape: Sequence[int]) -> torch.Tensor:
+        if leaf == "running_mean":
+            return normal(shape, 0.5 if far_statistics else 0.1)
+        if leaf == "running_var":
+            return (4.0 ** (2 * torch.rand(tuple(shape), generator=generator) - 1) if far_statistics
+                    else 1.0 + 0.2 * torch.rand(tuple(shape), generator=generator))
+        if len(shape) == 4:
+            fan_in = shape[1] * shape[2] * shape[3]
+            gain = head_gain if head in canonical else 1.0
+            return normal(shape, gain * (1.0 / fan_in) ** 0.5)
+        if leaf == "weight":  # a norm's affine scale
+            return normal(shape, 0.3 if far_statistics else 0.1, 1.0)
+        if far_statistics and (".norm" in canonical or canonical.endswith("downsample.1.bias")):
+            return normal(shape, 0.2)  # a norm's affine shift
+        return normal(shape, 0.02)
+
+    return seeded_state(keys, value)
+
+
+def seeded_state(keys: Sequence[tuple[str, Sequence[int]]],
+                 value: Callable[[str, str, Sequence[int]], torch.Tensor]) -> dict[str, torch.Tensor]:
+    """The state dict for ``keys`` ((name, shape) in file order): each value drawn, in that order, by
+    ``value(key, its last part, shape)`` where the key first appears (a ``norm3`` key takes its block's
+    ``downsample.1`` values, :func:`shared_key`); batch counters 0."""
+    values: dict[str, torch.Tensor] = {}
     state = {}
     for name, shape in keys:
-        canonical = _canonical(name)
+        canonical = shared_key(name)
         if canonical not in values:
             leaf = canonical.rsplit(".", 1)[-1]
-            if leaf == "num_batches_tracked":
-                value = torch.tensor(0, dtype=torch.int64)
-            elif leaf == "running_mean":
-                value = normal(shape, 0.5 if far_statistics else 0.1)
-            elif leaf == "running_var":
-                value = (4.0 ** (2 * torch.rand(tuple(shape), generator=generator) - 1) if far_statistics
-                         else 1.0 + 0.2 * torch.rand(tuple(shape), generator=generator))
-            elif len(shape) == 4:
-                fan_in = shape[1] * shape[2] * shape[3]
-                gain = head_gain if head in canonical else 1.0
-                value = normal(shape, gain * (1.0 / fan_in) ** 0.5)
-            elif leaf == "weight":  # a norm's affine scale
-                value = normal(shape, 0.3 if far_statistics else 0.1, 1.0)
-            elif far_statistics and (".norm" in canonical or canonical.endswith("downsample.1.bias")):
-                value = normal(shape, 0.2)  # a norm's affine shift
-            else:
-                value = normal(shape, 0.02)
-            values[canonical] = value
+            values[canonical] = (torch.tensor(0, dtype=torch.int64) if leaf == "num_batches_tracked"
+                                 else value(canonical, leaf, shape))
         state[name] = values[canonical].clone()
     return state
 

@@ -13,7 +13,6 @@ Only torch is needed: the project holds none of Selective-IGEV's code.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -21,56 +20,42 @@ from typing import Any
 import numpy as np
 import torch
 
+from tests import raft_golden
+from tests.raft_golden import seeded_state
+
 FIXTURES = Path(__file__).parent / "fixtures" / "selective_igev"
-
-
-def _canonical(name: str) -> str:
-    return name.replace(".norm3.", ".downsample.1.")
 
 
 def igev_state(keys: Sequence[tuple[str, Sequence[int]]], seed: int) -> dict[str, torch.Tensor]:
     """The state dict for ``keys`` ((name, shape) in file order) and ``seed``."""
     generator = torch.Generator().manual_seed(seed)
-    values: dict[str, torch.Tensor] = {}
 
     def uniform(shape: Sequence[int], low: float, high: float) -> torch.Tensor:
         return low + (high - low) * torch.rand(tuple(shape), generator=generator)
 
-    state = {}
-    for name, shape in keys:
-        canonical = _canonical(name)
-        if canonical not in values:
-            leaf = canonical.rsplit(".", 1)[-1]
-            if leaf == "num_batches_tracked":
-                value = torch.tensor(0, dtype=torch.int64)
-            elif leaf == "running_mean":
-                value = uniform(shape, -0.5, 0.5)
-            elif leaf == "running_var":
-                value = torch.exp(uniform(shape, -1.2, 1.1))  # 0.3 … 3
-            elif len(shape) >= 3:  # a convolution's weights
-                fan_in = int(np.prod(shape[1:]))
-                if ".conv_dw." in canonical:  # depthwise: one input channel per output
-                    fan_in = int(np.prod(shape[2:]))
-                value = (1.0 / fan_in) ** 0.5 * torch.randn(tuple(shape), generator=generator)
-            elif leaf == "weight":  # a norm's affine scale
-                value = uniform(shape, 0.5, 1.5)
-            elif ".bn" in canonical or ".norm" in canonical or "downsample.1." in canonical:
-                value = uniform(shape, -0.3, 0.3)  # a norm's shift
-            else:
-                value = 0.02 * torch.randn(tuple(shape), generator=generator)
-            values[canonical] = value
-        state[name] = values[canonical].clone()
-    return state
+    def value(canonical: str, leaf: str, shape: Sequence[int]) -> torch.Tensor:
+        if leaf == "running_mean":
+            return uniform(shape, -0.5, 0.5)
+        if leaf == "running_var":
+            return torch.exp(uniform(shape, -1.2, 1.1))  # 0.3 … 3
+        if len(shape) >= 3:  # a convolution's weights
+            fan_in = int(np.prod(shape[1:]))
+            if ".conv_dw." in canonical:  # depthwise: one input channel per output
+                fan_in = int(np.prod(shape[2:]))
+            return (1.0 / fan_in) ** 0.5 * torch.randn(tuple(shape), generator=generator)
+        if leaf == "weight":  # a norm's affine scale
+            return uniform(shape, 0.5, 1.5)
+        if ".bn" in canonical or ".norm" in canonical or "downsample.1." in canonical:
+            return uniform(shape, -0.3, 0.3)  # a norm's shift
+        return 0.02 * torch.randn(tuple(shape), generator=generator)
+
+    return seeded_state(keys, value)
 
 
 def load_fixture(name: str) -> dict[str, Any]:
     """The fixture ``name``: its JSON (flags, seed, keys, iterations, crop) with the npz arrays (``left``,
     ``right`` uint8 H×W×3, ``disparity`` float32 H×W, the reference's output) added."""
-    with open(FIXTURES / f"{name}.json", encoding="utf-8") as handle:
-        fixture = json.load(handle)
-    with np.load(FIXTURES / f"{name}.npz") as arrays:
-        fixture.update({key: arrays[key] for key in arrays.files})
-    return fixture
+    return raft_golden.load_fixture(name, FIXTURES)
 
 
 def fixture_state(fixture: dict[str, Any]) -> dict[str, torch.Tensor]:

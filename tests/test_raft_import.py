@@ -19,17 +19,16 @@ from typing import Any
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 torch = pytest.importorskip("torch")
 
-from core.formats import read_pfm, write_rgb  # noqa: E402
 from model.checkpoint import load_checkpoint  # noqa: E402
 from model.predictor import Predictor  # noqa: E402
 from model.raft_import import Flags, NotRaftStereo, convert, infer_architecture, strip_module  # noqa: E402
 from model.stereo import corr as corr_module  # noqa: E402
+from tests.golden_cli import assert_accounted, excess, predict_cli  # noqa: E402
+from tests.golden_cli import cli as _cli  # noqa: E402
 from tests.raft_golden import fixture_state, load_fixture  # noqa: E402
-from webapp.cli import main  # noqa: E402
 
 # architecture → (tensors in the published layout, tensors of the network, norm3 duplicates, never-run tensors)
 COUNTS = {"default": (337, 317, 20, 0), "realtime": (309, 244, 20, 45), "rvc": (152, 152, 0, 0)}
@@ -44,15 +43,6 @@ ARCHITECTURES = {
 }
 # wide fixture → its published layout: disparities past ±100 px, batch norm far from identity
 WIDE = {"default_wide": "default", "realtime_wide": "realtime"}
-
-
-def excess(ours: np.ndarray, reference: np.ndarray) -> float:
-    """How far the worst pixel lies beyond the tolerance, 1e-3 px + 1e-4·|reference| (≤ 0: within)."""
-    return float((np.abs(ours - reference) - (1e-3 + 1e-4 * np.abs(reference))).max())
-
-
-def _cli(home: Path, *args: str):  # type: ignore[no-untyped-def]
-    return CliRunner().invoke(main, ["--data-dir", str(home), *args])
 
 
 @pytest.fixture()
@@ -71,11 +61,7 @@ def test_imported_checkpoint_predicts_what_raft_stereo_does(name: str, home: Pat
     imported = _cli(home, "checkpoints", "import", "--from", "raft-stereo", str(published), "--json")
     assert imported.exit_code == 0, imported.output
     doc = json.loads(imported.output)
-    in_file, loaded, duplicates, unused = COUNTS[layout]
-    assert doc["checkpoint"] == f"imported:raftstereo-{layout}"
-    assert (doc["tensors_in_file"], doc["keys_loaded"], doc["duplicates"], len(doc["unused"])) == COUNTS[layout]
-    assert in_file == loaded + duplicates + unused  # every tensor of the file has its place or its reason
-    assert doc["architecture"].items() >= ARCHITECTURES[layout].items()
+    assert_accounted(doc, f"imported:raftstereo-{layout}", COUNTS[layout], ARCHITECTURES[layout])
     payload = load_checkpoint(home / "checkpoints" / "imported" / f"raftstereo-{layout}.pt")
     assert payload["config"]["model"]["upsample_border"] == "zeros" and payload["source"]["file"] == published.name
     assert payload["config"]["preset"] == "raft-stereo" and not payload["config"]["train"]["amp"]
@@ -89,13 +75,7 @@ def _predict(home: Path, tmp_path: Path, fixture: dict[str, Any], checkpoint: st
     """`predict` with ``checkpoint`` on the fixture's pair (sides not multiples of 32), its iterations."""
     height, width = fixture["shape"]
     assert height % 32 and width % 32
-    write_rgb(tmp_path / "left.png", fixture["left"])
-    write_rgb(tmp_path / "right.png", fixture["right"])
-    out = tmp_path / "disparity.pfm"
-    predicted = _cli(home, "predict", str(tmp_path / "left.png"), str(tmp_path / "right.png"), "--checkpoint",
-                     checkpoint, "--iters", str(fixture["iters"]), "--out", str(out))
-    assert predicted.exit_code == 0, predicted.output
-    ours = read_pfm(out)
+    ours = predict_cli(home, tmp_path, fixture, checkpoint, "--iters", str(fixture["iters"]))
     assert ours.shape == (height, width)
     return ours
 

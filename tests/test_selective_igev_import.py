@@ -10,8 +10,6 @@ with its flag; `evaluate` scores the import beside SGBM and Selective-RAFT in on
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Iterator
-from contextlib import AbstractContextManager, contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -21,13 +19,13 @@ from click.testing import CliRunner
 
 torch = pytest.importorskip("torch")
 
-from core.formats import read_pfm, write_rgb  # noqa: E402
-from model import predictor as predictor_module  # noqa: E402
 from model.checkpoint import load_checkpoint  # noqa: E402
 from model.predictor import Predictor  # noqa: E402
-from model.presets import ModelConfig  # noqa: E402
 from model.selective_igev_import import Flags, convert, to_theirs  # noqa: E402
 from model.stereo.selective_igev import SelectiveIGEV, SelectiveIGEVConfig  # noqa: E402
+from tests.golden_cli import PADDING_BUGS, assert_accounted, assert_evaluated_beside, excess  # noqa: E402
+from tests.golden_cli import cli as _cli  # noqa: E402
+from tests.golden_cli import predict_cli as _predict  # noqa: E402
 from tests.raft_golden import fixture_state as raft_state  # noqa: E402
 from tests.raft_golden import load_fixture as raft_fixture  # noqa: E402
 from tests.selective_igev_golden import fixture_state, load_fixture  # noqa: E402
@@ -36,15 +34,6 @@ from webapp.cli import main  # noqa: E402
 # (tensors in the published layout, tensors of the network, norm3 duplicates, training-only tensors)
 COUNTS = (785, 759, 20, 6)
 SELECTIVE_RAFT = Path(__file__).parent / "fixtures" / "selective_raft"
-
-
-def _cli(home: Path, *args: str):  # type: ignore[no-untyped-def]
-    return CliRunner().invoke(main, ["--data-dir", str(home), *args])
-
-
-def excess(ours: np.ndarray, reference: np.ndarray) -> float:
-    """How far the worst pixel lies beyond the tolerance, 1e-3 px + 1e-4·|reference| (≤ 0: within)."""
-    return float((np.abs(ours - reference) - (1e-3 + 1e-4 * np.abs(reference))).max())
 
 
 @pytest.fixture(scope="module")
@@ -66,24 +55,13 @@ def home(tmp_path: Path) -> Path:
     return tmp_path / "ws"
 
 
-def _predict(home: Path, tmp_path: Path, fixture: dict[str, Any], checkpoint: str, *args: str) -> np.ndarray:
-    write_rgb(tmp_path / "left.png", fixture["left"])
-    write_rgb(tmp_path / "right.png", fixture["right"])
-    out = tmp_path / "disparity.pfm"
-    result = _cli(home, "predict", str(tmp_path / "left.png"), str(tmp_path / "right.png"), "--checkpoint",
-                  checkpoint, "--out", str(out), *args)
-    assert result.exit_code == 0, result.output
-    return read_pfm(out)
-
-
 def test_imported_checkpoint_predicts_what_selective_igev_does(fixture: dict[str, Any], published: Path,
                                                                home: Path, tmp_path: Path) -> None:
     imported = _cli(home, "checkpoints", "import", "--from", "selective-igev", str(published), "--max-disp", "192",
                     "--name", "sigev", "--json")
     assert imported.exit_code == 0, imported.output
     doc = json.loads(imported.output)
-    assert doc["checkpoint"] == "imported:sigev"
-    assert (doc["tensors_in_file"], doc["keys_loaded"], doc["duplicates"], len(doc["unused"])) == COUNTS
+    assert_accounted(doc, "imported:sigev", COUNTS, {})
     assert doc["architecture"] == {"n_gru_layers": 3, "corr_levels": 2, "corr_radius": 4, "max_disp": 192,
                                    "iterations": 32, "dtype": "float32", "given": ["max_disp"]}
     payload = load_checkpoint(home / "checkpoints" / "imported" / "sigev.pt")
@@ -106,32 +84,6 @@ def test_imported_checkpoint_predicts_what_selective_igev_does(fixture: dict[str
     assert excess(_predict(home, tmp_path, fixture, "imported:sigev-384"), reference) > 0
 
 
-class _ZeroPadding:
-    """torch.nn.functional, but ``pad`` fills with zeros whatever mode it is asked for."""
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(torch.nn.functional, name)
-
-    def pad(self, x, padding, mode="constant"):  # type: ignore[no-untyped-def]
-        return torch.nn.functional.pad(x, padding, mode="constant")
-
-
-def _patched(target: Any, name: str, value: Any) -> Callable[[], AbstractContextManager[None]]:
-    @contextmanager
-    def patch() -> Iterator[None]:
-        with pytest.MonkeyPatch.context() as mp:
-            mp.setattr(target, name, value)
-            yield
-    return patch
-
-
-# Deliberate bugs of the predictor's path (the one `predict` and `evaluate` take): each must be caught.
-BUGS: dict[str, Callable[[], AbstractContextManager[None]]] = {
-    "padded bottom/right": _patched(ModelConfig, "inference_padding", property(lambda self: (32, False))),
-    "padded with zeros, not replicated": _patched(predictor_module, "F", _ZeroPadding()),
-}
-
-
 def test_the_predictor_path_holds_and_fails_for_each_deliberate_bug(fixture: dict[str, Any]) -> None:
     conversion = convert(fixture_state(fixture), Flags(max_disp=192))
     predictor = Predictor(conversion.network, conversion.config)
@@ -140,7 +92,7 @@ def test_the_predictor_path_holds_and_fails_for_each_deliberate_bug(fixture: dic
         return predictor.predict(fixture["left"], fixture["right"]).disparity
 
     assert excess(predict(), fixture["disparity"]) <= 0
-    for bug, patch in BUGS.items():
+    for bug, patch in PADDING_BUGS.items():  # the predictor's path, the one `predict` and `evaluate` take
         with patch():
             assert excess(predict(), fixture["disparity"]) > 0, f"{bug} went unnoticed"
 
@@ -182,8 +134,6 @@ def test_the_cli_refuses_what_the_tensors_do_not_settle_in_one_line(published: P
 
 def test_evaluate_scores_selective_igev_beside_the_others_in_one_report(tmp_path: Path, fixture: dict[str, Any],
                                                                         published: Path) -> None:
-    from tests.test_evaluate import _write_kitti
-
     home = tmp_path / "evaluated"
     assert _cli(home, "init").exit_code == 0
     imported = _cli(home, "checkpoints", "import", "--from", "selective-igev", str(published), "--max-disp", "192",
@@ -195,28 +145,7 @@ def test_evaluate_scores_selective_igev_beside_the_others_in_one_report(tmp_path
     imported = _cli(home, "checkpoints", "import", "--from", "selective-raft", str(raft_file), "--json")
     assert imported.exit_code == 0, imported.output
     selective_raft = json.loads(imported.output)["checkpoint"]
-    _write_kitti(tmp_path / "kitti")  # two 64×128 pairs
-    out = tmp_path / "report"
-    result = _cli(home, "evaluate", "--data", str(tmp_path / "kitti"), "--format", "kitti",
-                  "--method", "selective-igev", "--method", "selective-raft", "--method", "sgbm",
-                  "--checkpoint", f"selective-igev={igev}", "--checkpoint", f"selective-raft={selective_raft}",
-                  "--iters", "2", "--out", str(out), "--here", "--json")
-    assert result.exit_code == 0, result.output[-2000:]
-    report = json.loads(result.stdout)
-    assert set(report["methods"]) == {"selective_igev", "selective_raft", "sgbm"} and report["failed"] == []
-    for method in report["methods"].values():
-        assert method["regions"]["all"]["samples"] == 2 and np.isfinite(method["regions"]["all"]["epe"])
-    assert report["params"]["checkpoints"] == {"selective_igev": igev, "selective_raft": selective_raft}
-    pfm = out / "predictions" / "selective_igev" / "training" / "image_2" / "000000_10.pfm"
-    assert pfm.is_file() and read_pfm(pfm).shape == (64, 128)
-    # Each baseline scores its own network: a Selective-RAFT checkpoint is no Selective-IGEV.
-    wrong = _cli(home, "evaluate", "--data", str(tmp_path / "kitti"), "--format", "kitti", "--method",
-                 "selective-igev", "--checkpoint", f"selective-igev={selective_raft}", "--out", str(tmp_path / "r2"),
-                 "--here")
-    assert wrong.exit_code != 0 and "selective-igev scores a Selective-IGEV network's checkpoint" in wrong.output
-    alone = _cli(home, "evaluate", "--data", str(tmp_path / "kitti"), "--format", "kitti", "--method",
-                 "selective-igev", "--checkpoint", igev, "--here")
-    assert alone.exit_code != 0 and "selective-igev needs its own checkpoint" in alone.output
+    assert_evaluated_beside(home, tmp_path, "selective-igev", igev, "selective-raft", selective_raft, "Selective-IGEV")
 
 
 def test_the_preset_is_import_only_and_pads_as_the_demo() -> None:

@@ -11,27 +11,22 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Callable, Iterator
-from contextlib import AbstractContextManager, contextmanager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 torch = pytest.importorskip("torch")
 
-from core.formats import read_pfm, write_rgb  # noqa: E402
-from model import predictor as predictor_module  # noqa: E402
 from model.checkpoint import load_checkpoint  # noqa: E402
 from model.predictor import Predictor  # noqa: E402
-from model.presets import ModelConfig  # noqa: E402
 from model.raft_import import Flags, strip_module  # noqa: E402
 from model.selective_raft_import import NotSelectiveRaft, convert, infer_architecture  # noqa: E402
 from model.stereo import selective_raft  # noqa: E402
+from tests.golden_cli import PADDING_BUGS, Patch, assert_accounted, assert_evaluated_beside, excess, patched, predict_cli  # noqa: E402
+from tests.golden_cli import cli as _cli  # noqa: E402
 from tests.raft_golden import fixture_state, load_fixture  # noqa: E402
-from webapp.cli import main  # noqa: E402
 
 FIXTURES = Path(__file__).parent / "fixtures" / "selective_raft"
 # architecture → (tensors in the file, tensors of the network, norm3 duplicates, never-run tensors)
@@ -43,15 +38,6 @@ ARCHITECTURES = {
                  "given": ["corr_levels", "corr_radius"]},
 }
 TWO_LEVEL_FLAGS = ("--corr-levels", "4", "--corr-radius", "4")
-
-
-def _cli(home: Path, *args: str):  # type: ignore[no-untyped-def]
-    return CliRunner().invoke(main, ["--data-dir", str(home), *args])
-
-
-def excess(ours: np.ndarray, reference: np.ndarray) -> float:
-    """How far the worst pixel lies beyond the tolerance, 1e-3 px + 1e-4·|reference| (≤ 0: within)."""
-    return float((np.abs(ours - reference) - (1e-3 + 1e-4 * np.abs(reference))).max())
 
 
 @pytest.fixture(scope="module")
@@ -78,38 +64,20 @@ def test_imported_checkpoint_predicts_what_selective_raft_does(name: str, fixtur
                     f"sr-{name}", "--json", *flags)
     assert imported.exit_code == 0, imported.output
     doc = json.loads(imported.output)
-    in_file, loaded, duplicates, unused = COUNTS[name]
-    assert doc["checkpoint"] == f"imported:sr-{name}"
-    assert (doc["tensors_in_file"], doc["keys_loaded"], doc["duplicates"], len(doc["unused"])) == COUNTS[name]
-    assert in_file == loaded + duplicates + unused  # every tensor of the file has its place or its reason
-    assert doc["architecture"].items() >= ARCHITECTURES[name].items()
+    assert_accounted(doc, f"imported:sr-{name}", COUNTS[name], ARCHITECTURES[name])
     payload = load_checkpoint(home / "checkpoints" / "imported" / f"sr-{name}.pt")
     assert payload["config"]["preset"] == "selective-raft" and payload["config"]["model"]["upsample_border"] == "zeros"
     assert payload["source"]["from"] == "selective-raft" and not payload["config"]["train"]["amp"]
 
     height, width = fixture["shape"]
     assert height % 32 and width % 32 and left.shape[:2] == (height, width)
-    write_rgb(tmp_path / "left.png", left)
-    write_rgb(tmp_path / "right.png", right)
-    out = tmp_path / "disparity.pfm"
-    predicted = _cli(home, "predict", str(tmp_path / "left.png"), str(tmp_path / "right.png"), "--checkpoint",
-                     doc["checkpoint"], "--out", str(out))  # no --iters: the demo's 32 are the default
-    assert predicted.exit_code == 0, predicted.output
-    ours, reference = read_pfm(out), fixture["disparity"]
+    ours = predict_cli(home, tmp_path, fixture, doc["checkpoint"])  # no --iters: the demo's 32 are the default
+    reference = fixture["disparity"]
     assert ours.shape == reference.shape == (height, width)
     assert excess(ours, reference) <= 0, f"{name}: off by up to {np.abs(ours - reference).max():.2e} px"
 
 
 # Deliberate bugs, each a change a port could make: the comparison above must catch every one.
-def _patched(target: Any, name: str, value: Any) -> Callable[[], AbstractContextManager[None]]:
-    @contextmanager
-    def patch() -> Iterator[None]:
-        with pytest.MonkeyPatch.context() as mp:
-            mp.setattr(target, name, value)
-            yield
-    return patch
-
-
 def _update_reads_plus_d(self, net, context, attention, corr, disp, *, with_mask):  # type: ignore[no-untyped-def]
     return _UPDATE(self, net, context, attention, corr, -disp, with_mask=with_mask)
 
@@ -118,24 +86,13 @@ def _attention_swapped(self, attention, h, *x):  # type: ignore[no-untyped-def]
     return self.small(h, None, *x) * (1 - attention) + self.large(h, None, *x) * attention
 
 
-class _ZeroPadding:
-    """torch.nn.functional, but ``pad`` fills with zeros whatever mode it is asked for."""
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(torch.nn.functional, name)
-
-    def pad(self, x, padding, mode="constant"):  # type: ignore[no-untyped-def]
-        return torch.nn.functional.pad(x, padding, mode="constant")
-
-
 _UPDATE = selective_raft.SelectiveUpdate.forward
-BUGS: dict[str, Callable[[], AbstractContextManager[None]]] = {
-    "motion encoder reads +d": _patched(selective_raft.SelectiveUpdate, "forward", _update_reads_plus_d),
-    "attention maps swapped": _patched(selective_raft.SelectiveGRU, "forward", _attention_swapped),
-    "no channel attention": _patched(selective_raft.ChannelAttention, "forward",
-                                     lambda self, x: torch.ones_like(x[:, :, :1, :1])),
-    "padded bottom/right": _patched(ModelConfig, "inference_padding", property(lambda self: (32, False))),
-    "padded with zeros, not replicated": _patched(predictor_module, "F", _ZeroPadding()),
+BUGS: dict[str, Patch] = {
+    "motion encoder reads +d": patched(selective_raft.SelectiveUpdate, "forward", _update_reads_plus_d),
+    "attention maps swapped": patched(selective_raft.SelectiveGRU, "forward", _attention_swapped),
+    "no channel attention": patched(selective_raft.ChannelAttention, "forward",
+                                    lambda self, x: torch.ones_like(x[:, :, :1, :1])),
+    **PADDING_BUGS,
 }
 
 
@@ -244,7 +201,6 @@ def test_the_cli_refuses_in_one_line_and_a_half_precision_file_imports(home: Pat
 
 
 def test_evaluate_scores_selective_raft_beside_the_others_in_one_report(tmp_path: Path, fixtures) -> None:  # type: ignore[no-untyped-def]
-    from tests.test_evaluate import _write_kitti
     from tests.test_raft_baseline import import_default
 
     home = tmp_path / "evaluated"
@@ -256,27 +212,7 @@ def test_evaluate_scores_selective_raft_beside_the_others_in_one_report(tmp_path
     assert imported.exit_code == 0, imported.output
     selective = json.loads(imported.output)["checkpoint"]
     raft = import_default(home, tmp_path)
-    _write_kitti(tmp_path / "kitti")  # two 64×128 pairs
-    out = tmp_path / "report"
-    result = _cli(home, "evaluate", "--data", str(tmp_path / "kitti"), "--format", "kitti",
-                  "--method", "selective-raft", "--method", "raft-stereo", "--method", "sgbm",
-                  "--checkpoint", f"selective-raft={selective}", "--checkpoint", f"raft-stereo={raft}",
-                  "--iters", "2", "--out", str(out), "--here", "--json")
-    assert result.exit_code == 0, result.output[-2000:]
-    report = json.loads(result.stdout)
-    assert set(report["methods"]) == {"selective_raft", "raft_stereo", "sgbm"} and report["failed"] == []
-    for method in report["methods"].values():
-        assert method["regions"]["all"]["samples"] == 2 and np.isfinite(method["regions"]["all"]["epe"])
-    assert report["params"]["checkpoints"] == {"selective_raft": selective, "raft_stereo": raft}
-    pfm = out / "predictions" / "selective_raft" / "training" / "image_2" / "000000_10.pfm"
-    assert pfm.is_file() and read_pfm(pfm).shape == (64, 128)
-    # Each baseline scores its own network: a RAFT-Stereo checkpoint is no Selective-RAFT.
-    wrong = _cli(home, "evaluate", "--data", str(tmp_path / "kitti"), "--format", "kitti", "--method",
-                 "selective-raft", "--checkpoint", f"selective-raft={raft}", "--out", str(tmp_path / "r2"), "--here")
-    assert wrong.exit_code != 0 and "selective-raft scores a Selective-RAFT network's checkpoint" in wrong.output
-    alone = _cli(home, "evaluate", "--data", str(tmp_path / "kitti"), "--format", "kitti", "--method",
-                 "selective-raft", "--checkpoint", selective, "--here")
-    assert alone.exit_code != 0 and "selective-raft needs its own checkpoint" in alone.output
+    assert_evaluated_beside(home, tmp_path, "selective-raft", selective, "raft-stereo", raft, "Selective-RAFT")
 
 
 def test_the_preset_is_import_only_and_the_network_trains_with_frozen_batch_norm() -> None:

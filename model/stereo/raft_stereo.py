@@ -12,7 +12,8 @@ its head writes: (−d, 0) in, −Δd out.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Self
 
 import torch
 from torch import Tensor, nn
@@ -101,7 +102,49 @@ class RaftUpdate(nn.Module):
         return net, self.flow_head(net[0]), self.mask(net[0]) if with_mask else None
 
 
-class RaftStereoBranch(nn.Module):
+# One update of the loop (:func:`iterate`): (hidden states, the correlation sampled at the disparity, the
+# disparity, with_mask) → (hidden states, the step subtracted from the disparity B×1×h×w, mask logits or None).
+Update = Callable[[list[Tensor], Tensor, Tensor, bool], tuple[list[Tensor], Tensor, Tensor | None]]
+
+
+def iterate(left: Tensor, right: Tensor, net: list[Tensor], update: Update, *, levels: int, radius: int, factor: int,
+            border: str, iters: int, all_iterates: bool) -> StereoResult:
+    """RAFT-Stereo's loop, as the networks built on it (Selective-RAFT) run it too: the correlation of the
+    ``left``/``right`` matching features, built and sampled in float32 outside any autocast; from
+    disparity 0, ``iters`` updates, each subtracting its step (the heads write −Δd), the mask asked for at
+    the last (at every one with ``all_iterates``) and convex-upsampled (``factor``, ``border``) where given."""
+    # As RAFT-Stereo: the correlation is built and sampled in float32, outside any autocast.
+    with torch.autocast(left.device.type, enabled=False):
+        corr = CorrPyramid1D(left.float(), right.float(), levels=levels, radius=radius)
+    disparity = torch.zeros_like(left[:, :1], dtype=torch.float32)
+    low, full = [], []
+    mask = None
+    for step in range(iters):
+        disparity = disparity.detach()
+        with torch.autocast(left.device.type, enabled=False):
+            sampled = corr.lookup(disparity)
+        net, delta, mask = update(net, sampled, disparity, all_iterates or step == iters - 1)
+        disparity = disparity - delta.float()
+        low.append(disparity)
+        if mask is not None:
+            full.append(convex_upsample(disparity, mask, factor, border))
+    assert mask is not None
+    return StereoResult(low, full, net[0], mask, left, corr)
+
+
+class FrozenBatchNorm(nn.Module):
+    """A module that trains as RAFT-Stereo (and Selective-RAFT's freeze_bn) does: its batch norm stays
+    frozen (running statistics, eval mode)."""
+
+    def train(self, mode: bool = True) -> Self:
+        super().train(mode)
+        for module in self.modules():
+            if isinstance(module, nn.BatchNorm2d):
+                module.eval()
+        return self
+
+
+class RaftStereoBranch(FrozenBatchNorm):
     """Left/right images normalised to [−1, 1] (B×3×H×W) → disparity iterates, as RAFT-Stereo."""
 
     def __init__(self, config: ModelConfig) -> None:
@@ -138,35 +181,17 @@ class RaftStereoBranch(nn.Module):
             assert self.features is not None
             features = self.features(both)
         left_features, right_features = features[:batch], features[batch:]
-        net = [torch.tanh(h) for h in hidden]
         context = [tuple(zqr(torch.relu(x)).chunk(3, dim=1)) for zqr, x in zip(self.zqr, inputs, strict=True)]
-        # As RAFT-Stereo: the correlation is built and sampled in float32, outside any autocast.
-        with torch.autocast(left.device.type, enabled=False):
-            corr = CorrPyramid1D(left_features.float(), right_features.float(), levels=self.levels, radius=self.radius)
-        disparity = torch.zeros_like(left_features[:, :1], dtype=torch.float32)
-        low, full = [], []
-        mask = None
-        for step in range(iters):
-            disparity = disparity.detach()
-            with torch.autocast(left.device.type, enabled=False):
-                sampled = corr.lookup(disparity)
+
+        def update(net: list[Tensor], sampled: Tensor, disparity: Tensor,
+                   with_mask: bool) -> tuple[list[Tensor], Tensor, Tensor | None]:
             if self.slow_fast:
                 for finest in range(self.update.levels - 1, 0, -1):
                     net = self.update.refine(net, context, finest)
-            last = step == iters - 1
             flow = torch.cat([-disparity, torch.zeros_like(disparity)], dim=1)
-            net, delta, mask = self.update(net, context, sampled, flow, with_mask=all_iterates or last)
-            disparity = disparity - delta[:, :1].float()
-            low.append(disparity)
-            if mask is not None:
-                full.append(convex_upsample(disparity, mask, self.factor, self.border))
-        assert mask is not None
-        return StereoResult(low, full, net[0], mask, left_features, corr)
+            net, delta, mask = self.update(net, context, sampled, flow, with_mask=with_mask)
+            return net, delta[:, :1], mask
 
-    def train(self, mode: bool = True) -> RaftStereoBranch:
-        """As RAFT-Stereo trains: batch norm stays frozen (running statistics, eval mode)."""
-        super().train(mode)
-        for module in self.modules():
-            if isinstance(module, nn.BatchNorm2d):
-                module.eval()
-        return self
+        return iterate(left_features, right_features, [torch.tanh(h) for h in hidden], update, levels=self.levels,
+                       radius=self.radius, factor=self.factor, border=self.border, iters=iters,
+                       all_iterates=all_iterates)

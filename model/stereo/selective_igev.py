@@ -33,6 +33,7 @@ from model.stereo.igev_volume import (
     disparity_regression,
     groupwise_volume,
 )
+from model.stereo.inputs import centred_padding, check_pair
 from model.stereo.mobilenet_features import MobileNetV2Stem, mobilenetv2_stages
 from model.stereo.raft import StereoResult
 from model.stereo.raft_stereo import ContextEncoder
@@ -280,13 +281,6 @@ class SelectiveIgevBranch(SelectiveIGEV):
                                              corr_radius=config.corr_radius, max_disp=config.max_disp))
 
 
-def centred_padding(height: int, width: int, multiple: int = PAD_MULTIPLE) -> tuple[int, int, int, int]:
-    """(left, right, top, bottom) pixels that bring H×W to multiples of ``multiple``, split as the
-    reference's InputPadder does (the odd pixel on the right/bottom)."""
-    pad_h, pad_w = -height % multiple, -width % multiple
-    return pad_w // 2, pad_w - pad_w // 2, pad_h // 2, pad_h - pad_h // 2
-
-
 def predict_disparity(network: SelectiveIGEV, left: np.ndarray, right: np.ndarray, *,
                       iters: int = DEMO_ITERATIONS) -> np.ndarray:
     """What Selective-IGEV's demo_imgs.py computes for a pair: ``left``/``right`` RGB uint8 H×W×3 of one
@@ -294,13 +288,9 @@ def predict_disparity(network: SelectiveIGEV, left: np.ndarray, right: np.ndarra
     as it is). Centred replicate padding to multiples of 32, ``iters`` refinements (the demo's 32),
     test mode, the padding cropped off; on the network's device, float32, no autograd. Puts the network
     in eval mode, as the demo does (batch norms use their running statistics)."""
-    for name, image in (("left", left), ("right", right)):
-        if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
-            raise ValueError(f"{name} image must be RGB uint8 H×W×3, got {image.dtype} {image.shape}")
-    if left.shape != right.shape:
-        raise ValueError(f"left and right images differ in size: {left.shape[:2]} vs {right.shape[:2]}")
+    check_pair(left, right)
     height, width = left.shape[:2]
-    padding = centred_padding(height, width)
+    padding = centred_padding(height, width, PAD_MULTIPLE)
     device = next(network.parameters()).device
     network.eval()
 

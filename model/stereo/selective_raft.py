@@ -17,12 +17,18 @@ import torch
 from torch import Tensor, nn
 
 from model.presets import ModelConfig
-from model.stereo.corr import CorrPyramid1D
 from model.stereo.extractor import FeatureEncoder
 from model.stereo.raft import StereoResult
-from model.stereo.raft_stereo import HEAD_WIDTH, MOTION_CHANNELS, MOTION_WIDTH, ContextEncoder
+from model.stereo.raft_stereo import (
+    HEAD_WIDTH,
+    MOTION_CHANNELS,
+    MOTION_WIDTH,
+    ContextEncoder,
+    FrozenBatchNorm,
+    iterate,
+)
 from model.stereo.update import ConvGRU, MotionEncoder, pool2x, resize_like
-from model.stereo.upsample import MaskHead, convex_upsample
+from model.stereo.upsample import MaskHead
 
 # Selective-RAFT's fixed sizes: its GRUs' two kernels, the channel attention's reduction (in//16) and
 # the spatial attention's kernel.
@@ -97,7 +103,8 @@ class SelectiveUpdate(nn.Module):
         return net, self.disp_head(net[0]), self.mask(net[0]) if with_mask else None
 
 
-class SelectiveRaftBranch(nn.Module):
+class SelectiveRaftBranch(FrozenBatchNorm):
+    # As Selective-RAFT trains (its freeze_bn): batch norm stays frozen (running statistics).
     """Left/right images normalised to [−1, 1] (B×3×H×W) → disparity iterates, as Selective-RAFT."""
 
     def __init__(self, config: ModelConfig) -> None:
@@ -123,34 +130,15 @@ class SelectiveRaftBranch(nn.Module):
         hidden, inputs, _ = self.cnet(left, batch)
         features = self.features(torch.cat([left, right], dim=0))
         left_features, right_features = features[:batch], features[batch:]
-        net = [torch.tanh(h) for h in hidden]
         context = [torch.relu(x) for x in inputs]
         context = [self.cam(x) * x for x in context]
         attention = [self.sam(x) for x in context]
-        # As Selective-RAFT: the correlation is built and sampled in float32, outside any autocast.
-        with torch.autocast(left.device.type, enabled=False):
-            corr = CorrPyramid1D(left_features.float(), right_features.float(), levels=self.levels, radius=self.radius)
-        disparity = torch.zeros_like(left_features[:, :1], dtype=torch.float32)
-        low, full = [], []
-        mask = None
-        for step in range(iters):
-            disparity = disparity.detach()
-            with torch.autocast(left.device.type, enabled=False):
-                sampled = corr.lookup(disparity)
-            last = step == iters - 1
-            net, delta, mask = self.update(net, context, attention, sampled, -disparity,
-                                           with_mask=all_iterates or last)
-            disparity = disparity - delta.float()
-            low.append(disparity)
-            if mask is not None:
-                full.append(convex_upsample(disparity, mask, self.factor, self.border))
-        assert mask is not None
-        return StereoResult(low, full, net[0], mask, left_features, corr)
 
-    def train(self, mode: bool = True) -> SelectiveRaftBranch:
-        """As Selective-RAFT trains (its freeze_bn): batch norm stays frozen (running statistics)."""
-        super().train(mode)
-        for module in self.modules():
-            if isinstance(module, nn.BatchNorm2d):
-                module.eval()
-        return self
+        def update(net: list[Tensor], sampled: Tensor, disparity: Tensor,
+                   with_mask: bool) -> tuple[list[Tensor], Tensor, Tensor | None]:
+            return self.update(net, context, attention, sampled, -disparity, with_mask=with_mask)
+
+        # As Selective-RAFT: RAFT-Stereo's loop, the correlation in float32.
+        return iterate(left_features, right_features, [torch.tanh(h) for h in hidden], update, levels=self.levels,
+                       radius=self.radius, factor=self.factor, border=self.border, iters=iters,
+                       all_iterates=all_iterates)
