@@ -29,7 +29,8 @@ def _record() -> dict:
 
 def test_every_record_cites_a_committed_trunk() -> None:
     """Each committed trunk file is the one its record names, and every benchmark JSON that starts from a
-    trunk cites one of them: the protocol-2 figures and pre-training the first, the stereo-only records theirs."""
+    trunk cites one of them, of its kind: the protocol-2 figures and pre-training the no-VLM trunk, the
+    stereo-only records a stereo-only one, the matcher's-truth records a matcher-trained one."""
     committed = {}
     for file in sorted((BENCH / "trunk").glob("*.safetensors")):
         digest = hashlib.sha256(file.read_bytes()).hexdigest()
@@ -44,8 +45,11 @@ def test_every_record_cites_a_committed_trunk() -> None:
     for path in sorted(BENCH.glob("pretrain-*.json")):
         cited[path.name] = json.loads(path.read_text())["trunk"]["sha256"]
     assert len(cited) >= 9  # the six protocol-2 figures, two pre-training runs, the protocol-3 checks
-    assert {name: committed.get(digest) for name, digest in cited.items()} == {
-        name: ("trunk-stereo-only.safetensors" if "stereo-only" in name else "trunk.safetensors") for name in cited}
+    trunks = {name: committed.get(digest) for name, digest in cited.items()}
+    assert None not in trunks.values(), {name: trunk for name, trunk in trunks.items() if trunk is None}
+    for name, trunk in trunks.items():  # a record's name says which kind of trunk it started from
+        assert ("stereo-only" in trunk) == ("stereo-only" in name) and ("matcher" in trunk) == ("matcher" in name), (name, trunk)
+    assert trunks["pretrain-2026-12-03.json"] == "trunk.safetensors"
 
 
 def test_the_trunk_record_holds_the_config_it_trained_with() -> None:
