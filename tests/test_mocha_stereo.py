@@ -144,3 +144,10 @@ def test_files_that_are_not_mocha_stereo_are_refused(state: dict, tmp_path: Path
     torch.save([1, 2], path)
     with pytest.raises(NotMochaStereo, match="not a state dict"):
         read_published(path)
+
+
+def test_a_wrong_max_disp_is_another_output(fixture: dict[str, Any], state: dict) -> None:
+    # max_disp shapes the output though no tensor holds it: why the import never guesses it.
+    wider = convert(state, Flags(max_disp=384)).network.stereo_branch
+    ours = predict_disparity(wider, fixture["left"], fixture["right"])  # type: ignore[arg-type]
+    assert excess(ours, fixture["disparity"]) > 0
