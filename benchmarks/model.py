@@ -1,9 +1,9 @@
 """The fusion model's budget: the ``lite`` preset on one 1920×1080 pair, timed in a
 process of its own (peak resident memory: that child's own VmHWM), beside OpenCV SGBM
 on the same pair in the same run and the baselines' own networks (RAFT-Stereo's ``raft-stereo``,
-Selective-RAFT's ``selective-raft`` and Selective-IGEV's ``selective-igev`` presets at their published
-sizes and 32 test iterations, what an imported checkpoint runs: :data:`BASELINES`); parameters per module;
-training steps/s at the lite crop. The lite VLM's EfficientNet-Lite0 eye (``vlm_eye``, lite's
+Selective-RAFT's ``selective-raft``, Selective-IGEV's ``selective-igev`` and MoCha-Stereo's ``mocha-stereo``
+presets at their published sizes and 32 test iterations, what an imported checkpoint runs: :data:`BASELINES`);
+parameters per module; training steps/s at the lite crop. The lite VLM's EfficientNet-Lite0 eye (``vlm_eye``, lite's
 default): lite on the same pair with its VLM's patches instead, the eye's own stride-16 features at
 the size lite's VLM sees, and its parameters.
 
@@ -38,7 +38,8 @@ EYE = {"vlm_eye": "efficientnet-lite0", "vlm_eye_weights": "random"}
 # lite's VLM before it had an eye: image tokens from patches it learns itself
 PATCHES = {"vlm_eye": "patches"}
 # The baselines timed beside lite, by their keys in the JSON: the preset each runs.
-BASELINES = {"raft_stereo": "raft-stereo", "selective_raft": "selective-raft", "selective_igev": "selective-igev"}
+BASELINES = {"raft_stereo": "raft-stereo", "selective_raft": "selective-raft", "selective_igev": "selective-igev",
+             "mocha_stereo": "mocha-stereo"}
 
 
 def _pair(width: int, height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

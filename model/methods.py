@@ -1,8 +1,8 @@
 """The methods an evaluation compares, each a disparity predictor over :class:`StereoSample`s.
 
 ``fusion``, ``stereo`` and ``mono_align`` share one forward pass of a fusion checkpoint per
-sample; ``raft_stereo``, ``selective_raft`` and ``selective_igev`` are stereo-only networks'
-disparities (RAFT-Stereo's, Selective-RAFT's, Selective-IGEV's, e.g. imported published checkpoints:
+sample; ``raft_stereo``, ``selective_raft``, ``selective_igev`` and ``mocha_stereo`` are stereo-only networks'
+disparities (RAFT-Stereo's, Selective-RAFT's, Selective-IGEV's, MoCha-Stereo's, e.g. imported published checkpoints:
 :data:`BASELINE_METHODS`); each network method may have a checkpoint of its own, and methods that
 share one share its forward pass. ``mono_gt_align``
 and ``sgbm`` need no network (torch loads only when a network method is asked for); ``predictions``
@@ -41,7 +41,8 @@ BASELINE_METHODS: dict[str, Baseline] = {
     "raft_stereo": Baseline("raft-stereo", "RAFT-Stereo", "imported:raftstereo-sceneflow"),
     "selective_raft": Baseline("selective-raft", "Selective-RAFT", "imported:sceneflow"),
     "selective_igev": Baseline("selective-igev", "Selective-IGEV", "imported:selective-igev-sceneflow",
-                               "--max-disp 192")}  # no tensor holds it: 768 for middlebury_finetune
+                               "--max-disp 192"),  # no tensor holds it: 768 for middlebury_finetune
+    "mocha_stereo": Baseline("mocha-stereo", "MoCha-Stereo", "imported:mocha-stereo", "--max-disp 192")}
 METHODS = ("fusion", "stereo", "mono_align", *BASELINE_METHODS, "mono_gt_align", "sgbm", "predictions")
 NETWORK_METHODS = ("fusion", "stereo", "mono_align", *BASELINE_METHODS)
 FUSION_METHODS = ("fusion", "stereo", "mono_align")  # read from one fusion checkpoint's forward pass

@@ -2,7 +2,7 @@
 RAFT-Stereo's ``raft_stereo.py`` does: mono branch → context → stereo GRU iterations → VLM
 embeddings → flow confidence → global fusion. With ``model.architecture = "raft-stereo"`` (or
 another of :data:`BASELINE_BRANCHES`) the same class is that paper's own stereo-only network
-(model/stereo/raft_stereo.py, selective_raft.py, selective_igev.py), so training, checkpoints,
+(model/stereo/raft_stereo.py, selective_raft.py, selective_igev.py, mocha_stereo.py), so training, checkpoints,
 prediction and evaluation treat them alike."""
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from model.confidence import ConfidenceHead
 from model.fusion import GlobalFusion
 from model.mono import make_mono, normalize_mono
 from model.presets import ModelConfig
+from model.stereo.mocha_stereo import MochaBranch
 from model.stereo.raft import StereoBranch, StereoResult
 from model.stereo.raft_stereo import RaftStereoBranch
 from model.stereo.selective_igev import SelectiveIgevBranch
@@ -30,7 +31,8 @@ FROZEN_PREFIXES = ("mono.backbone.", "vlm.backbone.")
 # The stereo-only networks by model.architecture: images normalised to [−1, 1] → StereoResult.
 BASELINE_BRANCHES: dict[str, type[nn.Module]] = {"raft-stereo": RaftStereoBranch,
                                                  "selective-raft": SelectiveRaftBranch,
-                                                 "selective-igev": SelectiveIgevBranch}
+                                                 "selective-igev": SelectiveIgevBranch,
+                                                 "mocha-stereo": MochaBranch}
 
 
 @dataclass

@@ -23,7 +23,7 @@ PRESETS: tuple[str, ...] = ("lite", "paper")
 BASELINE_PRESETS: tuple[str, ...] = ("raft-stereo",)
 ALL_PRESETS: tuple[str, ...] = PRESETS + BASELINE_PRESETS
 # Networks that only published files fill (`checkpoints import`): loadable, not offered for training.
-IMPORT_PRESETS: tuple[str, ...] = ("selective-raft", "selective-igev")
+IMPORT_PRESETS: tuple[str, ...] = ("selective-raft", "selective-igev", "mocha-stereo")
 PRESET_DIR = Path(__file__).parent / "presets"
 # RAFT-Stereo's demo pads a pair centred to a multiple of 32 (its InputPadder); an imported
 # checkpoint predicts what the demo does only with the same padding (instance norm sees it).
@@ -32,12 +32,12 @@ RAFT_STEREO_PAD = 32
 MonoBackend = Literal["precomputed", "depth-anything-v2"]
 VlmBackend = Literal["lite", "qwen2-vl"]
 FusionRule = Literal["paper", "released"]
-Architecture = Literal["fusion", "raft-stereo", "selective-raft", "selective-igev"]
+Architecture = Literal["fusion", "raft-stereo", "selective-raft", "selective-igev", "mocha-stereo"]
 # The stereo-only networks of other papers, each with the centred padding of its demo.
-BASELINE_ARCHITECTURES: tuple[str, ...] = ("raft-stereo", "selective-raft", "selective-igev")
+BASELINE_ARCHITECTURES: tuple[str, ...] = ("raft-stereo", "selective-raft", "selective-igev", "mocha-stereo")
 # Baselines whose image sides must be a multiple of a fixed size, whatever their GRU levels: Selective-IGEV's
-# features reach 1/32 (its cost volume at 1/4 is halved three times).
-FIXED_SIZE_MULTIPLE: dict[str, int] = {"selective-igev": 32}
+# and MoCha-Stereo's features reach 1/32 (their cost volume at 1/4 is halved three times).
+FIXED_SIZE_MULTIPLE: dict[str, int] = {"selective-igev": 32, "mocha-stereo": 32}
 ContextNorm = Literal["batch", "instance", "group", "none"]
 UpsampleBorder = Literal["edge", "zeros"]
 ConfidenceTarget = Literal["threshold", "closer"]
@@ -125,7 +125,7 @@ class ModelConfig:
     # What the convex upsampling's 3×3 window sees past the border: "edge" (replicated, keeps the
     # outer pixels right) or "zeros" (RAFT's, which its published weights were trained with).
     upsample_border: UpsampleBorder = "edge"
-    # Selective-IGEV's --max_disp: the disparities its cost volume spans, in full-resolution pixels (a
+    # Selective-IGEV's (and MoCha-Stereo's) --max_disp: the disparities its cost volume spans, in full-resolution pixels (a
     # multiple of 32). No tensor depends on it and its published files differ (192; 768 for Middlebury).
     max_disp: int = 192
 

@@ -199,7 +199,7 @@ def resolve_depth_model(settings: Any | None, text: str) -> ResolvedCheckpoint:
 # Stereo networks whose published files import (`checkpoints import --from SOURCE`): the module
 # holding each one's ``convert``, its ``Flags`` and ``FLAGS`` (the Flags fields its files may need).
 STEREO_IMPORTERS: dict[str, str] = {"raft-stereo": "model.raft_import", "selective-raft": "model.selective_raft_import",
-                                    "selective-igev": "model.selective_igev_import"}
+                                    "selective-igev": "model.selective_igev_import", "mocha-stereo": "model.mocha_import"}
 IMPORT_SOURCES = (*STEREO_IMPORTERS, "depth-anything-v2")
 # How the CLI spells each architecture flag (the importers' Flags fields).
 FLAG_OPTIONS = {"context_norm": "--context-norm", "slow_fast_gru": "--slow-fast", "corr_levels": "--corr-levels",

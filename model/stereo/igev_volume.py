@@ -19,40 +19,50 @@ from model.stereo.corr import CorrPyramid1D
 
 
 class BasicConv(nn.Module):
-    """Convolution (2D or 3D, transposed if ``deconv``; no bias), BatchNorm, LeakyReLU(0.01). The norm
-    exists even when ``bn`` is off (IGEV's checkpoints hold its tensors), unused."""
+    """Convolution (2D or 3D, transposed if ``deconv``; no bias), BatchNorm, LeakyReLU(0.01) (ReLU where
+    ``leaky`` is off: MoCha-Stereo's refinement). The norm exists even when ``bn`` is off (IGEV's
+    checkpoints hold its tensors), unused."""
 
     def __init__(self, in_channels: int, out_channels: int, *, deconv: bool = False, is_3d: bool = False,
                  bn: bool = True, relu: bool = True, kernel_size: int | tuple[int, ...] = 3,
-                 stride: int | tuple[int, ...] = 1, padding: int | tuple[int, ...] = 0) -> None:
+                 stride: int | tuple[int, ...] = 1, padding: int | tuple[int, ...] = 0, dilation: int = 1,
+                 leaky: bool = True) -> None:
         super().__init__()
-        self.use_bn, self.relu = bn, relu
+        self.use_bn, self.relu, self.leaky = bn, relu, leaky
         conv: type[nn.Module]
         if is_3d:
             conv = nn.ConvTranspose3d if deconv else nn.Conv3d
         else:
             conv = nn.ConvTranspose2d if deconv else nn.Conv2d
-        self.conv = conv(in_channels, out_channels, kernel_size, stride=stride, padding=padding, bias=False)
+        self.conv = conv(in_channels, out_channels, kernel_size, stride=stride, padding=padding, dilation=dilation,
+                         bias=False)
         self.bn = nn.BatchNorm3d(out_channels) if is_3d else nn.BatchNorm2d(out_channels)
 
     def forward(self, x: Tensor) -> Tensor:
         x = self.conv(x)
         if self.use_bn:
             x = self.bn(x)
-        return F.leaky_relu(x) if self.relu else x
+        if not self.relu:
+            return x
+        return F.leaky_relu(x) if self.leaky else F.relu(x)
 
 
 class BasicConvIN(nn.Module):
-    """2D convolution (transposed if ``deconv``; no bias), InstanceNorm (no affine, no tensors),
-    LeakyReLU(0.01): IGEV's BasicConv_IN."""
+    """2D (3D if ``is_3d``) convolution (transposed if ``deconv``; no bias), InstanceNorm (no affine, no
+    tensors), LeakyReLU(0.01): IGEV's BasicConv_IN."""
 
-    def __init__(self, in_channels: int, out_channels: int, *, deconv: bool = False, norm: bool = True,
-                 relu: bool = True, kernel_size: int = 3, stride: int = 1, padding: int = 0) -> None:
+    def __init__(self, in_channels: int, out_channels: int, *, deconv: bool = False, is_3d: bool = False,
+                 norm: bool = True, relu: bool = True, kernel_size: int = 3, stride: int = 1,
+                 padding: int = 0) -> None:
         super().__init__()
         self.use_in, self.relu = norm, relu
-        conv = nn.ConvTranspose2d if deconv else nn.Conv2d
+        conv: type[nn.Module]
+        if is_3d:
+            conv = nn.ConvTranspose3d if deconv else nn.Conv3d
+        else:
+            conv = nn.ConvTranspose2d if deconv else nn.Conv2d
         self.conv = conv(in_channels, out_channels, kernel_size, stride=stride, padding=padding, bias=False)
-        self.IN = nn.InstanceNorm2d(out_channels)
+        self.IN = nn.InstanceNorm3d(out_channels) if is_3d else nn.InstanceNorm2d(out_channels)
 
     def forward(self, x: Tensor) -> Tensor:
         x = self.conv(x)
@@ -64,14 +74,23 @@ class BasicConvIN(nn.Module):
 class Conv2x(nn.Module):
     """IGEV's 2D Conv2x (``Conv2x_IN`` with ``instance``), concatenating, channels kept doubled: a
     stride-2 convolution (transposed, 4×4, when ``deconv``: upsampling ×2), resized (nearest) to
-    ``rem`` where the sizes differ, concatenated with it, a 3×3 unit → 2·out channels."""
+    ``rem`` where the sizes differ, concatenated with it, a 3×3 unit → 2·out channels. Without
+    ``keep_concat`` the 3×3 unit gives out channels, and ``leaky`` off makes the units ReLU: the
+    Conv2x of MoCha-Stereo's refinement (batch norm; its sizes always agree)."""
 
-    def __init__(self, in_channels: int, out_channels: int, deconv: bool, *, instance: bool = False) -> None:
+    def __init__(self, in_channels: int, out_channels: int, deconv: bool, *, instance: bool = False,
+                 keep_concat: bool = True, leaky: bool = True) -> None:
         super().__init__()
         kernel = 4 if deconv else 3
-        unit = BasicConvIN if instance else BasicConv
-        self.conv1 = unit(in_channels, out_channels, deconv=deconv, kernel_size=kernel, stride=2, padding=1)
-        self.conv2 = unit(2 * out_channels, 2 * out_channels, kernel_size=3, stride=1, padding=1)
+        if instance:
+            self.conv1: nn.Module = BasicConvIN(in_channels, out_channels, deconv=deconv, kernel_size=kernel,
+                                                stride=2, padding=1)
+            self.conv2: nn.Module = BasicConvIN(2 * out_channels, 2 * out_channels, kernel_size=3, stride=1, padding=1)
+        else:
+            self.conv1 = BasicConv(in_channels, out_channels, deconv=deconv, kernel_size=kernel, stride=2, padding=1,
+                                   leaky=leaky)
+            width = 2 * out_channels if keep_concat else out_channels
+            self.conv2 = BasicConv(2 * out_channels, width, kernel_size=3, stride=1, padding=1, leaky=leaky)
 
     def forward(self, x: Tensor, rem: Tensor) -> Tensor:
         x = self.conv1(x)
@@ -100,9 +119,9 @@ def _unit3d(in_channels: int, out_channels: int, kernel: int, stride: int = 1) -
 class Hourglass(nn.Module):
     """IGEV's cost aggregation: a 3D encoder–decoder over B×C×D×h×w at 1/4, three stride-2 stages
     (volume sides ÷8: D, h, w must be multiples of 8), each gated by the image features of its
-    resolution (1/8: 64, 1/16: 192, 1/32: 160 channels) → B×8×D×h×w."""
+    resolution (``feature_channels`` at 1/8, 1/16, 1/32: IGEV's 64, 192, 160) → B×8×D×h×w."""
 
-    def __init__(self, channels: int) -> None:
+    def __init__(self, channels: int, feature_channels: tuple[int, int, int] = (64, 192, 160)) -> None:
         super().__init__()
         c = channels
         self.conv1 = nn.Sequential(_unit3d(c, 2 * c, 3, 2), _unit3d(2 * c, 2 * c, 3))
@@ -114,11 +133,12 @@ class Hourglass(nn.Module):
         self.conv1_up = BasicConv(2 * c, 8, bn=False, relu=False, **up)  # type: ignore[arg-type]
         self.agg_0 = nn.Sequential(_unit3d(8 * c, 4 * c, 1), _unit3d(4 * c, 4 * c, 3), _unit3d(4 * c, 4 * c, 3))
         self.agg_1 = nn.Sequential(_unit3d(4 * c, 2 * c, 1), _unit3d(2 * c, 2 * c, 3), _unit3d(2 * c, 2 * c, 3))
-        self.feature_att_8 = FeatureAtt(2 * c, 64)
-        self.feature_att_16 = FeatureAtt(4 * c, 192)
-        self.feature_att_32 = FeatureAtt(6 * c, 160)
-        self.feature_att_up_16 = FeatureAtt(4 * c, 192)
-        self.feature_att_up_8 = FeatureAtt(2 * c, 64)
+        f8, f16, f32 = feature_channels
+        self.feature_att_8 = FeatureAtt(2 * c, f8)
+        self.feature_att_16 = FeatureAtt(4 * c, f16)
+        self.feature_att_32 = FeatureAtt(6 * c, f32)
+        self.feature_att_up_16 = FeatureAtt(4 * c, f16)
+        self.feature_att_up_8 = FeatureAtt(2 * c, f8)
 
     def forward(self, x: Tensor, features: list[Tensor]) -> Tensor:
         conv1 = self.feature_att_8(self.conv1(x), features[1])

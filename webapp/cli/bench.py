@@ -175,13 +175,16 @@ def memory_benchmark(as_json: bool) -> None:
               help="Skip Selective-RAFT's network (32 iterations at 1080p: minutes on a CPU).")
 @click.option("--no-selective-igev", "no_selective_igev", is_flag=True,
               help="Skip Selective-IGEV's network (32 iterations at 1080p, max_disp 192: minutes on a CPU).")
+@click.option("--no-mocha-stereo", "no_mocha_stereo", is_flag=True,
+              help="Skip MoCha-Stereo's network (32 iterations at 1080p, max_disp 192: minutes on a CPU).")
 def model_benchmark(as_json: bool, repeats: int, train_steps: int, no_raft_stereo: bool,
-                    no_selective_raft: bool, no_selective_igev: bool) -> None:
+                    no_selective_raft: bool, no_selective_igev: bool, no_mocha_stereo: bool) -> None:
     """The lite fusion model on a 1080p pair (own process: seconds, peak MB) beside OpenCV SGBM, RAFT-Stereo's,
-    Selective-RAFT's and Selective-IGEV's networks; parameters; train steps/s."""
+    Selective-RAFT's, Selective-IGEV's and MoCha-Stereo's networks; parameters; train steps/s."""
     from benchmarks.model import run_model_bench
 
-    skipped = {"raft_stereo": no_raft_stereo, "selective_raft": no_selective_raft, "selective_igev": no_selective_igev}
+    skipped = {"raft_stereo": no_raft_stereo, "selective_raft": no_selective_raft, "selective_igev": no_selective_igev,
+               "mocha_stereo": no_mocha_stereo}
     _report(run_model_bench(repeats=repeats, train_steps=train_steps,
                             skip=[key for key, skip in skipped.items() if skip]), as_json)
 

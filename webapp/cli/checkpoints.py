@@ -17,7 +17,7 @@ from webapp.cli.state import CliState, pass_state
 @click.option("--from", "source", required=True, type=click.Choice(registry.IMPORT_SOURCES),
               help="Whose checkpoint FILE is: raft-stereo (princeton-vl/RAFT-Stereo's published files), "
                    "selective-raft or selective-igev (Windsrain/Selective-Stereo's Selective-RAFT and "
-                   "Selective-IGEV files) or "
+                   "Selective-IGEV files), mocha-stereo (ZYangChen/MoCha-Stereo's mocha-stereo.pth) or "
                    "depth-anything-v2 (DepthAnything/Depth-Anything-V2's depth_anything_v2_vit*.pth).")
 @click.option("--name", default=None, help="Register it as imported:NAME (default: FILE's name, no extension).")
 @click.option("--replace", is_flag=True, help="Replace an imported checkpoint of that name.")
@@ -33,8 +33,9 @@ from webapp.cli.state import CliState, pass_state
               help="--corr_radius (RAFT-Stereo, Selective-RAFT, Selective-IGEV): needed unless the file is a "
                    "published layout.")
 @click.option("--max-disp", type=click.IntRange(32, 4096), default=None,
-              help="Selective-IGEV's --max_disp, pixels (no tensor holds it; required): 192 for its SceneFlow, "
-                   "KITTI and ETH3D files, 768 for middlebury_finetune.")
+              help="Selective-IGEV's and MoCha-Stereo's --max_disp, pixels (no tensor holds it; required): 192 "
+                   "for Selective-IGEV's SceneFlow, KITTI and ETH3D files and for mocha-stereo.pth, 768 for "
+                   "Selective-IGEV's middlebury_finetune.")
 @click.option("--iters", type=click.IntRange(1, 256), default=None,
               help="Its default iterations for predict and evaluate (default: the published file's documented "
                    "ones — RAFT-Stereo realtime 7, the others 32 — else the demo's 32).")
@@ -49,7 +50,7 @@ def import_checkpoint(state: CliState, file: Path, source: str, name: str | None
     README says where its files are. A RAFT-Stereo file whose tensors show none of the published layouts
     is refused unless the flags its tensors cannot settle are given (the refusal names them); so is a
     Selective-RAFT file's, whose only unsettled options are the correlation's levels and radius, and a
-    Selective-IGEV file without --max-disp (its cost volume's span, which no tensor holds)."""
+    Selective-IGEV or MoCha-Stereo file without --max-disp (its cost volume's span, which no tensor holds)."""
     given = {"context_norm": context_norm, "slow_fast_gru": slow_fast, "corr_levels": corr_levels,
              "corr_radius": corr_radius, "max_disp": max_disp, "iterations": iters}
     with service_errors():
@@ -72,6 +73,13 @@ def import_checkpoint(state: CliState, file: Path, source: str, name: str | None
                    f"{arch['iterations']} iterations by default, {result['keys_loaded']} tensors loaded "
                    f"({result['tensors_in_file']} in the file: {result['duplicates']} duplicates, "
                    f"{len(result['unused'])} never used by Selective-RAFT at this architecture)")
+        return
+    if source == "mocha-stereo":
+        click.echo(f"{result['checkpoint']}: MoCha-Stereo, {arch['n_gru_layers']} mogrifier-LSTM levels, "
+                   f"max_disp {arch['max_disp']} px, corr {arch['corr_levels']} levels × radius {arch['corr_radius']}, "
+                   f"{arch['iterations']} iterations by default, {result['keys_loaded']} tensors loaded "
+                   f"({result['tensors_in_file']} in the file: {result['duplicates']} duplicates, "
+                   f"{len(result['unused'])} never run in test mode)")
         return
     if source == "selective-igev":
         click.echo(f"{result['checkpoint']}: Selective-IGEV, {arch['n_gru_layers']} selective GRU levels, "

@@ -32,7 +32,8 @@ METHOD_CHOICES = [m.replace("_", "-") for m in METHODS] + list(METHODS)
 @click.option("--checkpoint", "checkpoints", multiple=True, metavar="[METHOD=]CHECKPOINT",
               help="RUN:NAME, imported:NAME or a file: the network methods' (default: the current model); "
                    "METHOD=… gives one method its own, e.g. raft-stereo=imported:raftstereo-sceneflow or "
-                   "selective-raft=imported:sceneflow or selective-igev=imported:selective-igev-sceneflow. "
+                   "selective-raft=imported:sceneflow or selective-igev=imported:selective-igev-sceneflow or "
+                   "mocha-stereo=imported:mocha-stereo. "
                    "Repeatable.")
 @click.option("--run", "run_id", type=int, help="A training run whose test split to evaluate on.")
 @click.option("--predictions", type=click.Path(exists=True, file_okay=False, path_type=Path),
