@@ -18,7 +18,7 @@ torch = pytest.importorskip("torch")
 import torch.nn.functional as F  # noqa: E402
 
 from model.mocha_import import Flags, NotMochaStereo, convert, infer_architecture, network_for, read_published  # noqa: E402
-from model.stereo import efficientnet_features, mocha_stereo  # noqa: E402
+from model.stereo import efficientnet_features, inputs  # noqa: E402
 from model.stereo.mocha_stereo import MochaStereo, high_pass, predict_disparity  # noqa: E402
 from tests.golden_cli import excess  # noqa: E402
 from tests.mocha_golden import fixture_state, load_fixture  # noqa: E402
@@ -83,7 +83,7 @@ def test_the_comparison_catches_deliberate_bugs(bug: str, fixture: dict, network
                                                 monkeypatch: pytest.MonkeyPatch) -> None:
     iters = 32
     if bug == "padding":
-        monkeypatch.setattr(mocha_stereo, "centred_padding", _bottom_right_padding)
+        monkeypatch.setattr(inputs, "centred_padding", _bottom_right_padding)
     elif bug == "batch_norm":
         norm = _bn_stuck_in_training(network)
     elif bug == "iterations":

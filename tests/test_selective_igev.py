@@ -15,7 +15,6 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-import model.stereo.selective_igev as selective_igev  # noqa: E402
 from model.raft_import import strip_module  # noqa: E402
 from model.selective_igev_import import (  # noqa: E402
     Flags,
@@ -26,6 +25,7 @@ from model.selective_igev_import import (  # noqa: E402
     network_for,
     to_theirs,
 )
+from model.stereo import inputs  # noqa: E402
 from model.stereo.selective_igev import SelectiveIGEV, SelectiveIGEVConfig, predict_disparity  # noqa: E402
 from tests.selective_igev_golden import fixture_state, load_fixture  # noqa: E402
 
@@ -92,7 +92,7 @@ def test_the_comparison_catches_deliberate_bugs(bug: str, fixture: dict, network
                                                 monkeypatch: pytest.MonkeyPatch) -> None:
     iters = 32
     if bug == "padding":
-        monkeypatch.setattr(selective_igev, "centred_padding", _bottom_right_padding)
+        monkeypatch.setattr(inputs, "centred_padding", _bottom_right_padding)
     elif bug == "batch_norm":
         _bn_stuck_in_training(network)
     elif bug == "iterations":

@@ -34,7 +34,7 @@ from model.stereo.igev_volume import (
     disparity_regression,
     groupwise_volume,
 )
-from model.stereo.inputs import centred_padding, check_pair
+from model.stereo.inputs import demo_disparity
 from model.stereo.raft import StereoResult
 from model.stereo.raft_stereo import ContextEncoder
 from model.stereo.selective_igev import DispHead
@@ -375,17 +375,4 @@ def predict_disparity(network: MochaStereo, left: np.ndarray, right: np.ndarray,
     H×W float32 disparity in pixels (positive: left x matches right x − d; the network's output as it
     is). Centred replicate padding to multiples of 32, ``iters`` refinements (the demo's 32), test mode,
     the padding cropped off; on the network's device, float32, no autograd, eval mode."""
-    check_pair(left, right)
-    height, width = left.shape[:2]
-    padding = centred_padding(height, width, PAD_MULTIPLE)
-    device = next(network.parameters()).device
-    network.eval()
-
-    def tensor(image: np.ndarray) -> Tensor:
-        t = torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None].float().to(device)
-        return 2 * (F.pad(t, padding, mode="replicate") / 255.0) - 1.0  # as the network's first step in the demo
-
-    with torch.inference_mode():
-        out = network(tensor(left), tensor(right), iters=iters).iterates[-1]
-    top, pad_left = padding[2], padding[0]
-    return out[0, 0, top:top + height, pad_left:pad_left + width].float().cpu().numpy().astype(np.float32)
+    return demo_disparity(network, left, right, iters, PAD_MULTIPLE)
