@@ -10,12 +10,37 @@ Disparities are positive pixels (left x matches right x − d), as IGEV's and ev
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
 from model.stereo.corr import CorrPyramid1D
+
+GROUPS = 8  # group-wise correlation groups (the volume's channels)
+
+
+@dataclass(frozen=True)
+class VolumeConfig:
+    """The IGEV family's reference argparse options that shape the volume and its lookup: ``corr_levels``,
+    ``corr_radius``, ``max_disp`` (pixels at full resolution, a multiple of 32: the cost volume spans
+    max_disp/4 disparities at 1/4)."""
+
+    corr_levels: int = 2
+    corr_radius: int = 4
+    max_disp: int = 192
+
+    def __post_init__(self) -> None:
+        if self.max_disp <= 0 or self.max_disp % 32:
+            raise ValueError(f"max_disp must be a positive multiple of 32, got {self.max_disp}")
+        if self.corr_levels < 1 or self.corr_radius < 0:
+            raise ValueError(f"corr_levels ≥ 1 and corr_radius ≥ 0, got {self.corr_levels}, {self.corr_radius}")
+
+    @property
+    def corr_planes(self) -> int:
+        """Channels the motion encoder reads: per level (GROUPS volume channels + 1 correlation) × samples."""
+        return self.corr_levels * (GROUPS + 1) * (2 * self.corr_radius + 1)
 
 
 class BasicConv(nn.Module):

@@ -24,12 +24,14 @@ from torch import Tensor, nn
 from model.presets import ModelConfig
 from model.stereo.efficientnet_features import efficientnetv2_l_stages, efficientnetv2_l_stem
 from model.stereo.igev_volume import (
+    GROUPS,
     BasicConv,
     BasicConvIN,
     Conv2x,
     FeatureAtt,
     GeometryEncoding,
     Hourglass,
+    VolumeConfig,
     context_upsample,
     disparity_regression,
     groupwise_volume,
@@ -43,7 +45,6 @@ from model.stereo.update import MotionEncoder, pool2x, resize_like
 HIDDEN = 128  # every published file's LSTM width (the reference's --hidden_dims default)
 LEVELS = 3  # LSTM levels: the reference always builds three; the published files run three
 MOTION_WIDTH, MOTION_CHANNELS, HEAD_WIDTH = 64, 128, 256
-GROUPS = 8
 PAD_MULTIPLE = 32  # demo.py's InputPadder(divis_by=32)
 DEMO_ITERATIONS = 32  # demo.py's --valid_iters default
 MOGRIFIER_ROUNDS = 5
@@ -51,24 +52,9 @@ FEATURE_CHANNELS = (128, 192, 448, 384)  # the decoder's outputs at 1/4 (before 
 
 
 @dataclass(frozen=True)
-class MochaConfig:
-    """The reference's argparse options that shape the network: ``corr_levels``, ``corr_radius``,
-    ``max_disp`` (pixels at full resolution, a multiple of 32)."""
-
-    corr_levels: int = 2
-    corr_radius: int = 4
-    max_disp: int = 192
-
-    def __post_init__(self) -> None:
-        if self.max_disp <= 0 or self.max_disp % 32:
-            raise ValueError(f"max_disp must be a positive multiple of 32, got {self.max_disp}")
-        if self.corr_levels < 1 or self.corr_radius < 0:
-            raise ValueError(f"corr_levels ≥ 1 and corr_radius ≥ 0, got {self.corr_levels}, {self.corr_radius}")
-
-    @property
-    def corr_planes(self) -> int:
-        """Channels the motion encoder reads: per level (8 volume channels + 1 correlation) × samples."""
-        return self.corr_levels * (GROUPS + 1) * (2 * self.corr_radius + 1)
+class MochaConfig(VolumeConfig):
+    """The reference's argparse options that shape the network: those of the volume (its LSTMs are always
+    three levels of 128)."""
 
 
 class Feature(nn.Module):

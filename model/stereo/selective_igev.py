@@ -23,12 +23,14 @@ from torch import Tensor, nn
 
 from model.presets import ModelConfig
 from model.stereo.igev_volume import (
+    GROUPS,
     BasicConv,
     BasicConvIN,
     Conv2x,
     FeatureAtt,
     GeometryEncoding,
     Hourglass,
+    VolumeConfig,
     context_upsample,
     disparity_regression,
     groupwise_volume,
@@ -41,34 +43,22 @@ from model.stereo.update import MotionEncoder, pool2x, resize_like
 
 HIDDEN = 128  # every published file's GRU width; the channel attention is built for 128 channels
 MOTION_WIDTH, MOTION_CHANNELS, HEAD_WIDTH = 64, 128, 256
-GROUPS = 8  # group-wise correlation groups (the volume's channels)
 PAD_MULTIPLE = 32  # the demo's InputPadder(divis_by=32): the volume at 1/4 is halved three times
 DEMO_ITERATIONS = 32  # demo_imgs.py's --valid_iters default
 
 
 @dataclass(frozen=True)
-class SelectiveIGEVConfig:
+class SelectiveIGEVConfig(VolumeConfig):
     """The reference's argparse options that shape the network: ``n_gru_layers`` (1–3),
     ``corr_levels``, ``corr_radius``, ``max_disp`` (pixels at full resolution, a multiple of 32: the
     cost volume spans max_disp/4 disparities at 1/4)."""
 
     n_gru_layers: int = 3
-    corr_levels: int = 2
-    corr_radius: int = 4
-    max_disp: int = 192
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         if self.n_gru_layers not in (1, 2, 3):
             raise ValueError(f"n_gru_layers must be 1, 2 or 3, got {self.n_gru_layers}")
-        if self.max_disp <= 0 or self.max_disp % 32:
-            raise ValueError(f"max_disp must be a positive multiple of 32, got {self.max_disp}")
-        if self.corr_levels < 1 or self.corr_radius < 0:
-            raise ValueError(f"corr_levels ≥ 1 and corr_radius ≥ 0, got {self.corr_levels}, {self.corr_radius}")
-
-    @property
-    def corr_planes(self) -> int:
-        """Channels the motion encoder reads: per level (8 volume channels + 1 correlation) × samples."""
-        return self.corr_levels * (GROUPS + 1) * (2 * self.corr_radius + 1)
 
 
 class Feature(nn.Module):
