@@ -88,13 +88,14 @@ from webapp.jobs.handlers import HANDLERS
 from webapp.runtime import Runtime
 
 # 1: pairs at a baseline from the training data, a split per seed; 2: frozen held-out pairs, one split;
-# 3: 100 held-out scenes per set, per-frame records and intervals over scenes and seeds
-PROTOCOL = 3
+# 3: 100 held-out scenes per set, per-frame records and intervals over scenes and seeds; 4: 96 capture
+# videos (a stereo branch that cannot learn a few dozen scenes' glass by heart), one split seed for all
+PROTOCOL = 4
 SIZE = (320, 192)  # W x H of every rendered frame
 FRAMES = 6  # per video
 GENERATED_VIDEOS = 6  # seeds 0..5 through the pipeline
 # Imported as captures: enough scenes that their mirrors fool stereo as much as the held-out ones do.
-RENDERED_SEEDS = tuple(range(40, 64))
+RENDERED_SEEDS = tuple(range(40, 136))
 TEST_SEEDS = tuple(range(1_000, 1_100))  # held out: never in training or validation; scored once, at the end
 VAL_SEEDS = tuple(range(2_000, 2_100))  # held out as well, rendered alike: the model's decisions are made on these
 HELD_OUT_FRAMES = 2  # per held-out scene: frames of one scene are alike, so scenes rather than frames
@@ -126,7 +127,6 @@ DEFAULT_STEPS = 1500  # from scratch
 FINETUNE_STEPS = 500  # from the pre-trained trunk: the paper fine-tunes briefly on illusions after pre-training
 SPLIT = "train=0.85,val=0.15"
 SPLIT_SEED = 0  # every benchmark seed trains on the train/val split this seed deals
-_SEED_SEARCH = 100_000  # launch seeds tried for one that deals SPLIT_SEED's split
 PREPARED = "prepared.json"  # in a workspace: the recipe it was prepared with and the conditions its data shows
 TRAINED = "trained.json"  # in a workspace: {network_key: run id} of every network launched there
 
@@ -152,15 +152,21 @@ ABLATIONS = (Network("no_vlm", {"model.use_vlm": False}, {"fusion_no_vlm": "fusi
 # Scored, never trained: the trunk composed as the no-VLM network (its fresh confidence and fusion heads
 # from the seed), at 0 steps. What fine-tuning adds is measured against it.
 TRUNK_AT_0 = Network("trunk_0", {"model.use_vlm": False}, {"trunk_0": "fusion", "trunk_0_stereo": "stereo"})
+# Scored, never trained, with a stereo-only trunk of its own (--stereo-only-pretrained): the stereo-only
+# network at 0 steps, a stereo branch pre-trained without the mono.
+STEREO_ONLY_AT_0 = Network("stereo_only_0", ABLATIONS[1].overrides, {"stereo_only_0": "stereo"})
+UNTRAINED = (TRUNK_AT_0, STEREO_ONLY_AT_0)
 
 
 def run_fusion_bench(work_dir: Path, *, seeds: int = 1, steps: int = DEFAULT_STEPS, ablations: bool = False,
                      split: str | None = None, mono: str = "realistic", workers: int = 1,
-                     pretrained: Path | None = None, overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
+                     pretrained: Path | None = None, stereo_only_pretrained: Path | None = None,
+                     overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Prepare (or reuse) the data in ``work_dir``, train per seed the fusion network (and, with
     ``ablations``, the no-VLM and stereo-only ones) — ``lite`` with ``overrides`` on every network, each
-    fine-tuned from the trunk file ``pretrained`` when one is given, each reused when the workspace has
-    trained it already —, ``workers`` trainings at a time, and score every method on the held-out pairs
+    fine-tuned from the trunk file ``pretrained`` when one is given (the stereo-only one from
+    ``stereo_only_pretrained``, a trunk that never read the mono, when given), each reused when the
+    workspace has trained it already —, ``workers`` trainings at a time, and score every method on the held-out pairs
     of ``split`` and ``mono`` (:func:`held_out_seeds`; which pairs are scored changes no network's key).
     Returns per method and region the mean (and spread over seeds) of EPE and bad-2, every seed's
     figures, fusion's paired differences against every other method, the conditions (mirror fooling,
@@ -170,26 +176,29 @@ def run_fusion_bench(work_dir: Path, *, seeds: int = 1, steps: int = DEFAULT_STE
     check_overrides(overrides, (FUSION, *ABLATIONS) if ablations else (FUSION,))
     started = time.perf_counter()
     trunk = load_trunk(pretrained) if pretrained is not None else None
+    stereo_only_trunk = load_stereo_only_trunk(stereo_only_pretrained, ablations)
     rt, cached, train_conditions = prepared_workspace(work_dir / "workspace")
     prepare_s = time.perf_counter() - started
     train_range = training_disparity_range(rt)
     pairs, render_s, info = _held_out(split, mono)
     networks = (FUSION, *ABLATIONS) if ablations else (FUSION,)
+    untrained = (*((TRUNK_AT_0,) if trunk else ()), *((STEREO_ONLY_AT_0,) if stereo_only_trunk else ()))
+    trunks = {n.name: stereo_only_trunk if stereo_only_trunk and n.overrides == ABLATIONS[1].overrides else trunk
+              for n in (*networks, *untrained)}
     timed = time.perf_counter()
     baseline_scores = score_frames(pairs, build_methods(list(BASELINES), checkpoint=None, predictions=None,
                                                         mono_dir=None), oracles=["sgbm"])
     baselines = baseline_scores.means()
     baselines_s = time.perf_counter() - timed
-    train_seeds = training_seeds(rt, seeds)
-    inits, init_report = _inits(rt, trunk, (*networks, *((TRUNK_AT_0,) if trunk else ())), train_seeds, steps,
-                                overrides)
+    train_seeds = training_seeds(seeds)
+    inits, init_report = _inits(rt, trunks, (*networks, *untrained), train_seeds, steps, overrides)
     ledger, fingerprint = rt.settings.home / TRAINED, model_fingerprint()
     launched: dict[tuple[int, str], int] = {}
     reused: list[int] = []
     for k, seed in enumerate(train_seeds):
         for network in networks:
             config = network_overrides(network, steps, overrides)
-            key = network_key(config, seed, trunk, fingerprint)
+            key = network_key(config, seed, trunks[network.name], fingerprint)
             run_id = finished_run(rt, ledger, key)
             if run_id is None:
                 run_id = launch_run(rt, seed, config, init=inits.get((k, network.name)))
@@ -200,7 +209,7 @@ def run_fusion_bench(work_dir: Path, *, seeds: int = 1, steps: int = DEFAULT_STE
     timed = time.perf_counter()
     run_jobs(rt, workers, launched.values())
     train_wall_s = time.perf_counter() - timed
-    scored = (*networks, *((TRUNK_AT_0,) if trunk else ()))
+    scored = (*networks, *untrained)
     runs = [_seed_scores(rt, k, pairs, scored, launched, inits) for k in range(seeds)]
     rt.close()
     record = held_out_record(pairs, [r["scores"] for r in runs], baseline_scores)
@@ -215,10 +224,12 @@ def run_fusion_bench(work_dir: Path, *, seeds: int = 1, steps: int = DEFAULT_STE
                      for k, seed in enumerate(train_seeds)],
         "seeds": seeds, "split_seed": SPLIT_SEED, "train_seeds": train_seeds, "steps": steps, "preset": "lite",
         "overrides": overrides, "size": f"{SIZE[0]}x{SIZE[1]}", "workers": workers, "reused_runs": reused,
-        "networks": {n.name: {"overrides": dict(n.overrides), "methods": list(n.methods), "trained": n is not TRUNK_AT_0}
+        "networks": {n.name: {"overrides": dict(n.overrides), "methods": list(n.methods), "trained": n not in UNTRAINED}
                      for n in scored},
         "pretrained": None if trunk is None else {"file": trunk.name, "sha256": trunk.sha256, "recipe": trunk.recipe,
                                                   "init": init_report},
+        "stereo_only_pretrained": None if stereo_only_trunk is None else {
+            "file": stereo_only_trunk.name, "sha256": stereo_only_trunk.sha256, "recipe": stereo_only_trunk.recipe},
         "conditions": {"training": train_conditions, "held_out": condition_ranges(condition_values(pairs))},
         "train_disparity_px": train_range, "pairs": info, "prepare_cached": cached,
         "timings_s": {"prepare": round(prepare_s, 1), "render_pairs": round(render_s, 1),
@@ -230,15 +241,31 @@ def run_fusion_bench(work_dir: Path, *, seeds: int = 1, steps: int = DEFAULT_STE
     }
 
 
-def _inits(rt: Runtime, trunk: Trunk | None, networks: tuple[Network, ...], train_seeds: list[int],
+def load_stereo_only_trunk(path: Path | None, ablations: bool) -> Trunk | None:
+    """The stereo-only network's own trunk at ``path`` (None: it starts from the others' trunk); ValueError
+    when it was pre-trained with the mono input or nothing trains the stereo-only network."""
+    if path is None:
+        return None
+    if not ablations:
+        raise ValueError("a stereo-only trunk starts the stereo-only network, which only --ablations trains")
+    trunk = load_trunk(path)
+    if trunk_network(trunk) is not ABLATIONS[1]:
+        raise ValueError(f"{path.name} was pre-trained with the mono input: the stereo-only network's trunk "
+                         "comes from `bench pretrain --stereo-only`")
+    return trunk
+
+
+def _inits(rt: Runtime, trunks: Mapping[str, Trunk | None], networks: tuple[Network, ...], train_seeds: list[int],
            steps: int, overrides: Mapping[str, Any]) -> tuple[dict[tuple[int, str], Path], dict[str, Any]]:
-    """Per (seed index, network) the init checkpoint composed from ``trunk`` (none without one), and per
-    network what it loaded from the trunk and what started fresh (the same names for every seed)."""
+    """Per (seed index, network) the init checkpoint composed from the network's trunk in ``trunks`` (none
+    without one), and per network what it loaded from it and what started fresh (the same names for
+    every seed)."""
     paths: dict[tuple[int, str], Path] = {}
     report: dict[str, Any] = {}
-    if trunk is None:
-        return paths, report
     for network in networks:
+        trunk = trunks[network.name]
+        if trunk is None:
+            continue
         config = load_preset("lite", network_overrides(network, steps, overrides))
         name = hashlib.sha256(json.dumps(config.to_dict(), sort_keys=True).encode()).hexdigest()[:12]
         for k, seed in enumerate(train_seeds):
@@ -493,29 +520,10 @@ def _range(values: np.ndarray) -> list[float]:
     return [round(float(np.percentile(values, 1)), 2), round(float(np.percentile(values, 99)), 2)]
 
 
-def training_seeds(rt: Runtime, count: int) -> list[int]:
-    """The launch seeds of the benchmark's ``count`` seeds over the workspace's accepted samples (what
-    a run with the default selection pins): :func:`split_keeping_seeds`."""
-    with rt.sessions() as s:
-        version = training.pin_selection(s, rt.media, training.DataSelection())
-    return split_keeping_seeds(version, count)
-
-
-def split_keeping_seeds(version: Mapping[str, Any], count: int) -> list[int]:
-    """The first ``count`` launch seeds, from SPLIT_SEED on, that split ``version`` into SPLIT's train and
-    validation videos exactly as SPLIT_SEED does. A launch's seed seeds both its split and its training
-    (``webapp.jobs.runs.launch``), so training with these keeps the split fixed over the benchmark's
-    seeds: each changes the initialisation, the order and the augmentation only."""
-    fractions = training.parse_split(SPLIT)
-    reference = training.split_version(dict(version), fractions, SPLIT_SEED)
-    found: list[int] = []
-    for seed in range(SPLIT_SEED, SPLIT_SEED + _SEED_SEARCH):
-        if training.split_version(dict(version), fractions, seed) == reference:
-            found.append(seed)
-            if len(found) == count:
-                return found
-    raise RuntimeError(f"benchmark: only {len(found)} of {_SEED_SEARCH} launch seeds split the data as seed "
-                       f"{SPLIT_SEED} does; fewer seeds, or fewer videos, would do")
+def training_seeds(count: int) -> list[int]:
+    """The launch seeds of the benchmark's ``count`` seeds: 0, 1, … Every one trains on SPLIT_SEED's split
+    (:func:`launch_run`), so a seed changes the initialisation, the order and the augmentation only."""
+    return list(range(count))
 
 
 def run_mono_bench(*, split: str | None = None, mono: str = "realistic", work_dir: Path | None = None,
@@ -568,7 +576,7 @@ def mono_figures(samples: list[StereoSample]) -> dict[str, dict[str, float]]:
 def _seed_scores(rt: Runtime, k: int, pairs: list[StereoSample], networks: tuple[Network, ...],
                  launched: Mapping[tuple[int, str], int], inits: Mapping[tuple[int, str], Path]) -> dict[str, Any]:
     """Each of ``networks`` of benchmark seed ``k`` scored on ``pairs`` frame by frame (one pass): its
-    trained best checkpoint (its run id in ``launched``), or for TRUNK_AT_0 its init checkpoint in
+    trained best checkpoint (its run id in ``launched``), or for the UNTRAINED its init checkpoint in
     ``inits``, untrained. Returns the FrameScores (each fusion method's gate over its own stereo branch,
     each stereo branch's oracle), the mean figures by report key, and per network its run id (trained
     ones), the seconds its training and its scoring took."""
@@ -576,7 +584,7 @@ def _seed_scores(rt: Runtime, k: int, pairs: list[StereoSample], networks: tuple
     runs: dict[str, int] = {}
     train_s: dict[str, float] = {}
     for network in networks:
-        if network is TRUNK_AT_0:
+        if network in UNTRAINED:
             checkpoint, seconds = inits[k, network.name], 0.0
         else:
             run_id = launched[k, network.name]
@@ -760,13 +768,13 @@ def record_run(ledger: Path, key: str, run_id: int) -> None:
 def launch_run(rt: Runtime, seed: int, overrides: Mapping[str, Any], *, split: str = SPLIT,
                init: Path | None = None) -> int:
     """Queue a ``lite`` training with ``overrides`` and launch ``seed`` over every accepted sample, split by
-    video in the shares of ``split``, starting from the checkpoint ``init`` if given, through the
-    product's training job: its run id."""
+    video in the shares of ``split`` as SPLIT_SEED deals them (whatever ``seed``), starting from the
+    checkpoint ``init`` if given, through the product's training job: its run id."""
     with transaction(rt.sessions) as s:
         admin = s.scalar(select(User).where(User.name == "bench-admin"))
         run = run_control.launch(
             rt, s, preset="lite", overrides=dict(overrides), selection=training.DataSelection(),
-            launch=training.Launch(split=training.parse_split(split), seed=seed,
+            launch=training.Launch(split=training.parse_split(split), seed=seed, split_seed=SPLIT_SEED,
                                    init_checkpoint=None if init is None else str(init),
                                    init_label=None if init is None else init.name), user=admin)
         return run.id

@@ -25,10 +25,9 @@ from safetensors.torch import save as save_safetensors
 
 from core.atomic import atomic_write_bytes
 from model.checkpoint import load_checkpoint, save_checkpoint
-from model.network import FusionNetwork
+from model.network import TRUNK_PREFIXES, FusionNetwork
 from model.presets import Config
 
-TRUNK_PREFIXES = ("mono.", "stereo_branch.")
 FORMAT = "illusion-studio-trunk/1"
 TRUNK_FILE = Path("pretrain") / "trunk.safetensors"  # under the benchmark's work dir
 # The stereo-only network's trunk (``bench pretrain --stereo-only``): a stereo branch that never read the mono.

@@ -128,7 +128,9 @@ class ConfidenceHead(nn.Module):
                 self.image = _feature_encoder(config.feature_dim, dim)
         else:
             self.decoder = _feature_encoder(config.feature_dim, dim)
-        inputs = dim * (2 if self.image is not None else 1) + config.corr_levels * (2 * config.corr_radius + 1)
+        self.sees_mono = config.confidence_sees_mono
+        inputs = (dim * (2 if self.image is not None else 1) + config.corr_levels * (2 * config.corr_radius + 1)
+                  + (len(MONO_VIEW) if self.sees_mono else 0))
         self.head = nn.Sequential(nn.Conv2d(inputs, dim, 3, padding=1), nn.ReLU(inplace=True),
                                   nn.Conv2d(dim, dim, 3, padding=1), nn.ReLU(inplace=True),
                                   nn.Conv2d(dim, 1, 1))
@@ -147,10 +149,12 @@ class ConfidenceHead(nn.Module):
         return y.transpose(1, 2).reshape(batch, self.latent, *grid)
 
     def forward(self, cost: Tensor, *, vlm: VlmResult | None = None, features: Tensor | None = None,
-                noise: torch.Generator | Sequence[torch.Generator] | None = None) -> Tensor:
+                noise: torch.Generator | Sequence[torch.Generator] | None = None,
+                disparities: tuple[Tensor, Tensor] | None = None) -> Tensor:
         """Confidence logits B×1×h×w. ``cost``: B×corr×h×w correlations sampled around D_s;
         ``vlm`` (use_vlm) and/or ``features`` (B×feature_dim×h×w left matching features: without
-        the VLM, or with ``confidence_image_features``)."""
+        the VLM, or with ``confidence_image_features``); ``disparities`` (``confidence_sees_mono``):
+        D_s and the mono fitted to it, B×1×h×w working-resolution pixels each (:func:`mono_view`)."""
         height, width = cost.shape[2:]
         if self.use_vlm:
             assert vlm is not None
@@ -162,7 +166,23 @@ class ConfidenceHead(nn.Module):
         else:
             assert features is not None
             decoded = [self.decoder(features)]
+        if self.sees_mono:
+            if disparities is None:
+                raise ValueError("model.confidence_sees_mono: the confidence head needs D_s and the fitted mono")
+            decoded.append(mono_view(*disparities))
         return self.head(torch.cat([*decoded, cost], dim=1))
+
+
+MONO_VIEW = ("stereo", "fitted", "difference")  # the channels of mono_view
+
+
+def mono_view(stereo: Tensor, fitted: Tensor) -> Tensor:
+    """B×3×h×w: D_s, the fitted mono and D_s minus it (B×1×h×w pixels each, no gradient back into them),
+    each over the image's stereo spread (its standard deviation, at least 1 px): scale-free, as the
+    fusion's own inputs are."""
+    stereo, fitted = stereo.detach(), fitted.detach()
+    spread = stereo.flatten(1).std(1).view(-1, 1, 1, 1).clamp_min(1.0)
+    return torch.cat([stereo, fitted, stereo - fitted], dim=1) / spread
 
 
 def _feature_encoder(in_channels: int, out_channels: int) -> nn.Module:

@@ -96,6 +96,9 @@ class GlobalFusion(nn.Module):
             self.residual = nn.Conv2d(dim, 1, 3, padding=1)
             _near_zero(self.residual)
             self.mask = MaskHead(dim, self.factor)
+            self.mask_from_stereo = config.fusion_mask_from_stereo
+            if self.mask_from_stereo:
+                _near_zero(self.mask.net[-1])
 
     def forward(self, mono: Tensor, stereo: Tensor, confidence: Tensor, hidden: Tensor,
                 stereo_mask: Tensor) -> FusionResult:
@@ -113,7 +116,8 @@ class GlobalFusion(nn.Module):
             return FusionResult(convex_upsample(blended, stereo_mask, self.factor, self.border), scale, shift)
         features = self.fuse(torch.cat([aligned / spread, stereo / spread, confidence, hidden], dim=1))
         low = blended + self.residual(features) * spread
-        return FusionResult(convex_upsample(low, self.mask(features), self.factor, self.border), scale, shift)
+        mask = self.mask(features) + (stereo_mask if self.mask_from_stereo else 0)
+        return FusionResult(convex_upsample(low, mask, self.factor, self.border), scale, shift)
 
 
 def _near_zero(conv: nn.Conv2d) -> None:

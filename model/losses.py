@@ -7,10 +7,11 @@ authors' code does, γ^(15/(T−1)) for T > 1 (γ itself for T = 1). L_c is the 
 target, ``train.confidence_target = "threshold"``). ``"closer"`` (``lite``) trusts the stereo also
 where it is no farther from D_G than the aligned mono D̃_m: the threshold alone sends every pixel
 the stereo misses by 1.25 px to the mono, which a coarse relative estimate misses by more.
-``train.confidence_loss = "ce"`` uses the plain cross entropy L_b times ``ce_weight`` instead of the
-focal term: the final L1 pulls the logits through the blend by about |D̃_m − D_s|·c(1−c) per pixel —
-5–10× the focal term's push outside mirrors and ~1000× inside them — and at c ≈ 0.84 the focal
-factor leaves ~1/55 of L_b's gradient.
+``"closer-fit"`` compares it with the mono fitted to the stereo per image (one scale and shift) instead
+of D̃_m, whose per-pixel affine can copy the stereo. ``train.confidence_loss = "ce"`` uses the plain
+cross entropy L_b times ``ce_weight`` instead of the focal term: the final L1 pulls the logits through
+the blend by about |D̃_m − D_s|·c(1−c) per pixel — 5–10× the focal term's push outside mirrors and
+~1000× inside them — and at c ≈ 0.84 the focal factor leaves ~1/55 of L_b's gradient.
 
 Only valid pixels with ground truth below ``max_disparity`` count. Every term is a SUM over
 this rank's pixels divided by ``valid_total``, the valid-pixel count summed over all ranks (the
@@ -70,6 +71,19 @@ def confidence_terms(logits: Tensor, target: Tensor, cfg: TrainConfig) -> Tensor
     return cfg.focal_weight * focal_terms(logits, target, cfg.focal_alpha, cfg.focal_gamma)
 
 
+def _mono_error(out: FusionOutput, gt: Tensor, cfg: TrainConfig) -> Tensor | None:
+    """|D_G − mono| for the "closer" targets (B×1×H×W pixels), None for "threshold": the aligned mono
+    D̃_m ("closer"), or the mono fitted to the stereo per image ("closer-fit"). D̃_m's per-pixel affine
+    sees D_s and can copy it where the confidence is high, and then the stereo always looks no farther
+    from the truth than the mono: the target would keep trusting a stereo fooled by a mirror."""
+    if cfg.confidence_target == "threshold":
+        return None
+    mono = out.mono_aligned if cfg.confidence_target == "closer" else out.mono_fitted
+    if mono is None:
+        raise ValueError("train.confidence_target = 'closer-fit' needs the network's fitted mono")
+    return (gt - mono.detach()).abs()
+
+
 def fusion_loss(out: FusionOutput, gt: Tensor, valid: Tensor, cfg: TrainConfig, *,
                 valid_total: Tensor | None = None) -> tuple[Tensor, dict[str, float]]:
     """(scalar loss, parts) for ``gt`` B×1×H×W pixels and ``valid`` bool B×1×H×W. Parts:
@@ -98,7 +112,7 @@ def fusion_loss(out: FusionOutput, gt: Tensor, valid: Tensor, cfg: TrainConfig, 
         final = l1(out.disparity)
         size = out.confidence_logits.shape[2:]
         error = (gt - out.stereo.detach()).abs()
-        mono_error = (gt - out.mono_aligned.detach()).abs() if cfg.confidence_target == "closer" else None
+        mono_error = _mono_error(out, gt, cfg)
         target, valid_low = confidence_target(error, mask, size, mono_error)
         area = (size[0] * size[1]) / (gt.shape[2] * gt.shape[3])
         terms = confidence_terms(out.confidence_logits, target, cfg)

@@ -15,7 +15,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from model.confidence import ConfidenceHead
-from model.fusion import GlobalFusion
+from model.fusion import GlobalFusion, least_squares_affine
 from model.mono import make_mono, normalize_mono
 from model.presets import ModelConfig
 from model.stereo.mocha_stereo import MochaBranch
@@ -28,6 +28,9 @@ from model.vlm import make_vlm
 # Parameters under these prefixes are frozen backbones: never trained, never stored in checkpoints
 # (their LoRA adapters, named "lora_", are).
 FROZEN_PREFIXES = ("mono.backbone.", "vlm.backbone.")
+# The trunk a fusion network is pre-trained as (``bench pretrain``): its mono context encoder and stereo
+# branch, what ``train.freeze_trunk`` holds fixed while the heads on top of it learn.
+TRUNK_PREFIXES = ("mono.", "stereo_branch.")
 # The stereo-only networks by model.architecture: images normalised to [−1, 1] → StereoResult.
 BASELINE_BRANCHES: dict[str, type[nn.Module]] = {"raft-stereo": RaftStereoBranch,
                                                  "selective-raft": SelectiveRaftBranch,
@@ -47,6 +50,9 @@ class FusionOutput:
     # A stereo-only network's (model.use_mono off): disparity is the stereo branch's, fully trusted
     # (confidence 1, logits +inf), no aligned mono (zeros); the loss is the iterates' alone.
     stereo_only: bool = False
+    # B×1×H×W pixels: the mono fitted to the stereo by one least-squares scale and shift per image (None
+    # for a stereo-only network): what the mono is worth where the gate takes it without a local fit.
+    mono_fitted: Tensor | None = None
 
 
 class FusionNetwork(nn.Module):
@@ -92,11 +98,10 @@ class FusionNetwork(nn.Module):
             return _stereo_only(stereo, mono_result.disparity)
         disparity_low = stereo.iterates_low[-1]
         cost = stereo.corr.lookup(disparity_low.detach())
-        if self.vlm is not None:
-            vlm = self.vlm(left_n, stereo.iterates[-1], mono_result.disparity)
-            logits = self.confidence(cost, vlm=vlm, features=stereo.left_features, noise=noise)
-        else:
-            logits = self.confidence(cost, features=stereo.left_features)
+        s0, t0 = least_squares_affine(mono_low, disparity_low.detach())
+        disparities = (disparity_low, s0 * mono_low + t0)
+        vlm = self.vlm(left_n, stereo.iterates[-1], mono_result.disparity) if self.vlm is not None else None
+        logits = self.confidence(cost, vlm=vlm, features=stereo.left_features, noise=noise, disparities=disparities)
         confidence = torch.sigmoid(logits)
         fused = self.fusion(mono_low, disparity_low, confidence, stereo.hidden, stereo.mask)
         size = left.shape[2:]
@@ -104,7 +109,7 @@ class FusionNetwork(nn.Module):
         shift = F.interpolate(fused.shift, size, mode="bilinear", align_corners=False)
         aligned = self.factor * (scale * mono_full + shift)
         return FusionOutput(fused.disparity, stereo.iterates, stereo.iterates[-1], aligned, confidence, logits,
-                            mono_result.disparity)
+                            mono_result.disparity, mono_fitted=self.factor * (s0 * mono_full + t0))
 
     def _check(self, left: Tensor, right: Tensor, mono: Tensor | None) -> None:
         if left.ndim != 4 or left.shape[1] != 3 or left.shape != right.shape:
@@ -150,6 +155,12 @@ class FusionNetwork(nn.Module):
             raise ValueError("checkpoint weights do not fit this network: "
                              f"missing {sorted(missing)[:5]}, unknown {sorted(unknown)[:5]}")
         self.load_state_dict(state, strict=False)
+
+    def freeze_trunk(self) -> None:
+        """Hold the trunk (TRUNK_PREFIXES) fixed: its parameters stop requiring gradients."""
+        for name, parameter in self.named_parameters():
+            if name.startswith(TRUNK_PREFIXES):
+                parameter.requires_grad_(False)
 
     def trainable_parameters(self) -> list[nn.Parameter]:
         """Parameters the optimiser updates (frozen backbones excluded, their LoRA adapters included)."""

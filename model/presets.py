@@ -40,7 +40,7 @@ BASELINE_ARCHITECTURES: tuple[str, ...] = ("raft-stereo", "selective-raft", "sel
 FIXED_SIZE_MULTIPLE: dict[str, int] = {"selective-igev": 32, "mocha-stereo": 32}
 ContextNorm = Literal["batch", "instance", "group", "none"]
 UpsampleBorder = Literal["edge", "zeros"]
-ConfidenceTarget = Literal["threshold", "closer"]
+ConfidenceTarget = Literal["threshold", "closer", "closer-fit"]
 ConfidenceLoss = Literal["focal", "ce"]
 VlmEye = Literal["patches", "efficientnet-lite0"]
 EyeWeights = Literal["package", "random"]
@@ -87,6 +87,11 @@ class ModelConfig:
     # state (lite: its VLM is trained from scratch on a few dozen samples, and its 1/32 tokens alone
     # cannot place a mirror's edge at 1/8). False: the flow's state alone, as the paper.
     confidence_image_features: bool = False
+    # True: the confidence head also sees, at its resolution, the stereo disparity, the mono fitted to it
+    # (one least-squares scale and shift per image) and their difference, over the stereo's spread. The
+    # cost volume around D_s says only how well D_s matches, and a reflection matches well; where a
+    # mirror fools stereo, what disagrees with it is the mono, so the gate cannot decide without it.
+    confidence_sees_mono: bool = False
     # False: a stereo-only network (`bench fusion --ablations`' stereo_only): the stereo branch alone,
     # its context encoder fed a constant for the mono input; no confidence or fusion; the output is its last iterate.
     use_mono: bool = True
@@ -107,6 +112,10 @@ class ModelConfig:
     # elsewhere, with the soft blend's gradient (straight-through): where stereo and mono err on the same
     # side (a fooled mirror) any soft mix adds (1−c)·|D̃_m − D_s| to what stereo alone gets right or wrong.
     fusion_gate: bool = False
+    # True: the fused map's convex upsampling starts as the stereo branch's (its own head predicts a
+    # correction to the stereo's mask logits, ≈ 0 at start), so a fully confident gate with no residual
+    # returns the stereo branch's output exactly, instead of a fresh upsampler's blur of it.
+    fusion_mask_from_stereo: bool = False
     # Inference on a larger pair runs on it shrunk to this many pixels (0: never), the disparity
     # scaled back up: what keeps the CPU-sized preset within its time budget at 1080p.
     max_inference_pixels: int = 0
@@ -210,8 +219,13 @@ class TrainConfig:
     confidence_loss: ConfidenceLoss = "focal"
     ce_weight: float = 1.0
     # The confidence's target: "threshold", the authors' 1[|D_G − D_s| < 1.25 px]; "closer" also
-    # trusts the stereo where it is no farther from D_G than the aligned mono (model/losses.py).
+    # trusts the stereo where it is no farther from D_G than the aligned mono D̃_m; "closer-fit" than
+    # the mono fitted to the stereo per image, which, unlike D̃_m, cannot copy D_s (model/losses.py).
     confidence_target: ConfidenceTarget = "threshold"
+    # True: the trunk (the mono context encoder and the stereo branch, model.network.TRUNK_PREFIXES) is
+    # held fixed and only the heads on it learn (VLM, confidence, fusion): a fine-tuning whose stereo
+    # branch cannot learn the training scenes' glass by heart, so that its errors there still teach the gate.
+    freeze_trunk: bool = False
     val_every: int = 250
     checkpoint_every: int = 250
     keep_last: int = 3
@@ -236,6 +250,11 @@ class Config:
     preset: str
     model: ModelConfig
     train: TrainConfig
+
+    def __post_init__(self) -> None:
+        if self.train.freeze_trunk and (self.model.architecture != "fusion" or not self.model.use_mono):
+            raise ValueError("train.freeze_trunk holds the stereo branch fixed, and a stereo-only network is nothing "
+                             "else: it would train nothing")
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able: tuples become lists."""

@@ -126,16 +126,20 @@ CONDITIONS = {"mirror_fooling_px": {"frames": 2, "min": 5.0, "median": 6.0, "max
               "aligned_mono_epe_px": {"frames": 2, "min": 1.0, "median": 2.0, "max": 3.0}}
 
 
-def test_report_carries_every_method_the_paired_record_and_the_timings(tmp_path: Path,
-                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
-    """run_fusion_bench end to end, fine-tuning from a trunk, with each network's init checkpoint (the
-    trunk's tensors and fresh ones) scored in place of its training and one frame per seed: every run
-    launched before any trains, from its init, the trainings run by ``workers`` at once."""
+def _trunk(tmp_path: Path, name: str, overrides: dict[str, Any]) -> Path:
+    """A trunk file of a fresh network of ``lite`` under ``overrides`` (seed 0), its record beside it."""
     torch.manual_seed(0)
-    pretrain_config = load_preset("lite", {"model.use_vlm": False})
-    save_checkpoint(tmp_path / "pre.pt", FusionNetwork(pretrain_config.model), pretrain_config, step=0)
-    trunk_file = tmp_path / "pretrain" / "trunk.safetensors"
-    save_trunk(tmp_path / "pre.pt", trunk_file, {"steps": 0})
+    config = load_preset("lite", overrides)
+    save_checkpoint(tmp_path / "pre.pt", FusionNetwork(config.model), config, step=0)
+    path = tmp_path / "pretrain" / name
+    save_trunk(tmp_path / "pre.pt", path, {"steps": 0, "overrides": overrides})
+    return path
+
+
+def _without_training(monkeypatch: pytest.MonkeyPatch) -> tuple[list[tuple[int, str]], list[int], list[tuple[int, ...]]]:
+    """run_fusion_bench with each network's init checkpoint scored in place of its training and one frame
+    per seed of the first two scenes. Returns what it will fill: the (seed, network) launched, the workers
+    the trainings were run with, the seeds rendered."""
     launched: list[tuple[int, str]] = []
     checkpoints: dict[int, Path] = {}
     drained: list[int] = []
@@ -158,15 +162,24 @@ def test_report_carries_every_method_the_paired_record_and_the_timings(tmp_path:
     monkeypatch.setattr(fusion, "prepared_workspace",
                         lambda home: (_Workspace(home), True, {"captures": CONDITIONS, "generated": CONDITIONS}))
     monkeypatch.setattr(fusion, "training_disparity_range", lambda _rt: [3.0, 44.0])
-    monkeypatch.setattr(fusion, "training_seeds", lambda _rt, count: [0, 7][:count])
     monkeypatch.setattr(fusion, "launch_run", from_init)
     monkeypatch.setattr(fusion, "run_jobs", lambda _rt, workers, runs: drained.append(workers))
     monkeypatch.setattr(fusion, "trained_checkpoint", lambda _rt, run_id: (checkpoints[run_id], 0.5 * run_id))
     monkeypatch.setattr(fusion, "held_out_samples", one_frame)
+    return launched, drained, rendered
+
+
+def test_report_carries_every_method_the_paired_record_and_the_timings(tmp_path: Path,
+                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """run_fusion_bench end to end, fine-tuning from a trunk, with each network's init checkpoint (the
+    trunk's tensors and fresh ones) scored in place of its training and one frame per seed: every run
+    launched before any trains, from its init, the trainings run by ``workers`` at once."""
+    trunk_file = _trunk(tmp_path, "trunk.safetensors", {"model.use_vlm": False})
+    launched, drained, rendered = _without_training(monkeypatch)
     report = fusion.run_fusion_bench(tmp_path, seeds=2, steps=20, ablations=True, split="val", workers=2,
                                      pretrained=trunk_file)
     assert rendered == [fusion.VAL_SEEDS]
-    assert launched == [(s, n) for s in (0, 7) for n in ("fusion", "no_vlm", "stereo_only")]
+    assert launched == [(s, n) for s in (0, 1) for n in ("fusion", "no_vlm", "stereo_only")]
     assert drained == [2] and report["workers"] == 2
     methods = report["methods"]
     trained = ["fusion", "stereo", "fusion_no_vlm", "stereo_no_vlm", "stereo_only"]
@@ -181,8 +194,8 @@ def test_report_carries_every_method_the_paired_record_and_the_timings(tmp_path:
     # the fresh heads of two seeds differ; the stereo-only network is all trunk, so its seeds start alike
     assert methods["fusion"]["all"]["epe_spread"] > 0 and methods["stereo_only"]["all"]["epe_spread"] == 0
     # the paired record: every seed's figures, and fusion against every other method
-    assert [(r["seed"], r["train_seed"]) for r in report["per_seed"]] == [(0, 0), (1, 7)]
-    assert report["train_seeds"] == [0, 7] and report["split_seed"] == fusion.SPLIT_SEED
+    assert [(r["seed"], r["train_seed"]) for r in report["per_seed"]] == [(0, 0), (1, 1)]
+    assert report["train_seeds"] == [0, 1] and report["split_seed"] == fusion.SPLIT_SEED
     for k, record in enumerate(report["per_seed"]):
         assert list(record["methods"]) == scored and record["runs"] == {"fusion": 3 * k + 1, "no_vlm": 3 * k + 2,
                                                                         "stereo_only": 3 * k + 3}
@@ -209,7 +222,7 @@ def test_report_carries_every_method_the_paired_record_and_the_timings(tmp_path:
     assert set(timings["score"]) == {"fusion", "no_vlm", "stereo_only", "trunk_0"}
     assert all(len(v) == 2 and min(v) > 0 for v in timings["score"].values())
     assert report["pairs"]["split"] == "val" and report["pairs"]["seeds"] == list(fusion.VAL_SEEDS)
-    assert report["pairs"]["baseline_m"] == 0.63 and report["protocol"] == 3
+    assert report["pairs"]["baseline_m"] == 0.63 and report["protocol"] == fusion.PROTOCOL == 4
     assert report["networks"]["stereo_only"]["overrides"] == {"model.use_vlm": False, "model.use_mono": False}
     provenance = report["provenance"]
     assert len(provenance["commit"]["commit"]) == 40 and len(provenance["sources"]["sha256"]) == 64
@@ -238,7 +251,31 @@ def test_report_carries_every_method_the_paired_record_and_the_timings(tmp_path:
     assert set(found["oracle"]) == {"sgbm", "stereo", "stereo_no_vlm", "stereo_only", "trunk_0_stereo"}
     assert all(v["all"]["value"] >= 0 for v in found["oracle"].values())  # the oracle is never worse than its stereo
     assert set(found["capture"]) == {"fusion", "fusion_no_vlm", "trunk_0"}
+    assert report["stereo_only_pretrained"] is None
     json.dumps(report, allow_nan=False)
+
+
+def test_the_stereo_only_network_starts_from_a_trunk_of_its_own(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """--stereo-only-pretrained: the stereo-only network fine-tunes from a trunk that never read the mono,
+    is scored at 0 steps from it as well, and its key names that trunk; a trunk with the mono is refused."""
+    trunk_file = _trunk(tmp_path, "trunk.safetensors", {"model.use_vlm": False})
+    own = _trunk(tmp_path, "trunk-stereo-only.safetensors", dict(fusion.ABLATIONS[1].overrides))
+    launched, _, _ = _without_training(monkeypatch)
+    report = fusion.run_fusion_bench(tmp_path, seeds=1, steps=20, ablations=True, split="val",
+                                     pretrained=trunk_file, stereo_only_pretrained=own)
+    assert launched == [(0, "fusion"), (0, "no_vlm"), (0, "stereo_only")]
+    assert list(report["methods"])[-4:] == ["trunk_0_stereo", "stereo_only_0", "mono_gt_align", "sgbm"]
+    assert report["stereo_only_pretrained"]["sha256"] == json.loads(own.with_suffix(".json").read_text())["sha256"]
+    assert report["networks"]["stereo_only_0"]["trained"] is False
+    init = report["pretrained"]["init"]
+    assert init["stereo_only"]["fresh"] == [] and init["stereo_only_0"]["loaded"] == init["stereo_only"]["loaded"]
+    # a network trained from the untrained trunk at 0 steps scores as that trunk: both are its init
+    assert report["methods"]["stereo_only"] == report["methods"]["stereo_only_0"]
+    assert "oracle:stereo_only_0" in report["per_frame"]["gates"]
+    with pytest.raises(ValueError, match="pre-trained with the mono input"):
+        fusion.load_stereo_only_trunk(trunk_file, True)
+    with pytest.raises(ValueError, match="--ablations"):
+        fusion.load_stereo_only_trunk(own, False)
 
 
 def test_aggregate_gives_mean_and_spread_over_seeds() -> None:
@@ -255,7 +292,7 @@ def test_cli_passes_ablations_split_and_the_trunk(tmp_path: Path, monkeypatch: p
     result = CliRunner().invoke(main, ["bench", "fusion", "--json", "--ablations", "--split", "val", "--steps", "20", *work])
     assert result.exit_code == 0, result.output
     assert calls == [{"seeds": 1, "steps": 20, "ablations": True, "split": "val", "mono": "realistic", "workers": 1,
-                      "pretrained": None, "overrides": {}}]
+                      "pretrained": None, "stereo_only_pretrained": None, "overrides": {}}]
     calls.clear()
     result = CliRunner().invoke(main, ["bench", "fusion", "--json", "--set", "model.fusion_gate=false", "--set",
                                        "confidence_loss = focal", *work])
@@ -278,7 +315,8 @@ def test_cli_passes_ablations_split_and_the_trunk(tmp_path: Path, monkeypatch: p
         assert calls[0]["pretrained"] == (expected if flags[:1] != ["--pretrained"] else tmp_path / "other"), flags
         # fine-tuning from a trunk is short; from scratch the benchmark trains longer
         assert calls[0]["steps"] == (fusion.DEFAULT_STEPS if flags == ["--scratch"] else fusion.FINETUNE_STEPS), flags
-    for flags in (["--ablations"], ["--workers", "2"], ["--set", "fusion_gate=true"]):
+    for flags in (["--ablations"], ["--workers", "2"], ["--set", "fusion_gate=true"],
+                  ["--stereo-only-pretrained", str(trunk)]):
         result = CliRunner().invoke(main, ["bench", "fusion", "--mono-only", *flags])
         assert result.exit_code == 2 and "--mono-only" in result.output, flags
     # --mono-only's oracle uses the trunk's stereo branch at 0 steps: the trunk is found as for training

@@ -4,6 +4,7 @@ pre-training seeds, and the pre-trained trunk that every network is fine-tuned f
 
 from __future__ import annotations
 
+import contextlib
 import json
 from pathlib import Path
 from types import SimpleNamespace
@@ -16,14 +17,14 @@ from click.testing import CliRunner
 torch = pytest.importorskip("torch")
 
 from benchmarks import fusion, pretrain  # noqa: E402
-from benchmarks.trunk import TRUNK_PREFIXES, compose_init, load_trunk, save_trunk  # noqa: E402
+from benchmarks.trunk import compose_init, load_trunk, save_trunk  # noqa: E402
 from benchmarks.trunk import trunk_file as trunk_path  # noqa: E402
 from dataset.services import training  # noqa: E402
 from dataset.synthetic import render_video  # noqa: E402
 from dataset.synthetic.corruptions import warped_mono  # noqa: E402
 from model.align import align  # noqa: E402
 from model.checkpoint import load_network, save_checkpoint  # noqa: E402
-from model.network import FusionNetwork  # noqa: E402
+from model.network import TRUNK_PREFIXES, FusionNetwork  # noqa: E402
 from model.presets import Config, load_preset  # noqa: E402
 from model.runs.handlers import resolve_config  # noqa: E402
 from webapp.cli import main  # noqa: E402
@@ -52,7 +53,6 @@ def test_held_out_pairs_are_bit_identical_whatever_the_training_workspace_holds(
 
     one_frame = fusion.held_out_samples
     monkeypatch.setattr(fusion, "held_out_samples", lambda seeds, mono: one_frame(seeds[:2], frames=1, mono=mono))
-    monkeypatch.setattr(fusion, "training_seeds", lambda _rt, count: list(range(count)))
     monkeypatch.setattr(fusion, "launch_run", lambda *_a, **_k: 1)
     monkeypatch.setattr(fusion, "finished_run", lambda *_a: None)  # both workspaces train their own
     monkeypatch.setattr(fusion, "run_jobs", lambda _rt, workers, runs: None)
@@ -127,7 +127,6 @@ def test_scoring_the_warp_pairs_after_val_trains_nothing(tmp_path: Path, monkeyp
     monkeypatch.setattr(fusion, "held_out_samples", lambda seeds, mono: one_frame(seeds[:1], frames=1, mono=mono))
     monkeypatch.setattr(fusion, "prepared_workspace", workspace)
     monkeypatch.setattr(fusion, "training_disparity_range", lambda _rt: [3.0, 44.0])
-    monkeypatch.setattr(fusion, "training_seeds", lambda _rt, count: list(range(count)))
     monkeypatch.setattr(fusion, "launch_run", launch)
     # the ledger's runs all succeeded (no database here)
     monkeypatch.setattr(fusion, "finished_run", lambda _rt, ledger, key: json.loads(ledger.read_text()).get(key)
@@ -146,23 +145,22 @@ def test_scoring_the_warp_pairs_after_val_trains_nothing(tmp_path: Path, monkeyp
     assert warp["conditions"]["held_out"]["aligned_mono_epe_px"]["median"] == round(epe[0], 3)
 
 
-def _version(videos: int) -> dict[str, Any]:
-    """A pinned version's shape: 3 samples of each of ``videos`` videos."""
-    items = [{"sample_id": 3 * v + i, "video_id": v + 1, "scene_group": v + 1} for v in range(videos) for i in range(3)]
-    return {"id": "v", "items": items}
-
-
 def test_every_benchmark_seed_trains_on_the_same_split(monkeypatch: pytest.MonkeyPatch) -> None:
-    version = _version(12)  # the benchmark's 6 generated videos and 6 captures
-    seeds = fusion.split_keeping_seeds(version, 3)
-    fractions = training.parse_split(fusion.SPLIT)
-    splits = [training.split_version(version, fractions, seed) for seed in seeds]
-    assert seeds[0] == fusion.SPLIT_SEED and len(set(seeds)) == 3 and splits[0] == splits[1] == splits[2]
-    skipped = [seed for seed in range(seeds[0], seeds[-1]) if seed not in seeds]
-    assert skipped and all(training.split_version(version, fractions, seed) != splits[0] for seed in skipped)
-    monkeypatch.setattr(fusion, "_SEED_SEARCH", 200)
-    with pytest.raises(RuntimeError, match="split the data"):
-        fusion.split_keeping_seeds(_version(60), 2)  # one seed in C(60, 9) deals the same validation videos
+    """Seeds 0, 1, 2 launch with SPLIT_SEED dealing the videos: the seed changes the training, not the split
+    (``tests/test_runs.py`` checks that a split seed keeps one split)."""
+    launched: list[training.Launch] = []
+
+    class Session:
+        def scalar(self, _query: Any) -> None:
+            return None
+
+    monkeypatch.setattr(fusion, "transaction", lambda _sessions: contextlib.nullcontext(Session()))
+    monkeypatch.setattr(fusion.run_control, "launch",
+                        lambda *_a, launch, **_kw: launched.append(launch) or SimpleNamespace(id=len(launched)))
+    seeds = fusion.training_seeds(3)
+    assert seeds == [0, 1, 2]
+    assert [fusion.launch_run(SimpleNamespace(sessions=None), seed, {}) for seed in seeds] == [1, 2, 3]
+    assert [(launch.seed, launch.split_seed) for launch in launched] == [(0, 0), (1, 0), (2, 0)]
 
 
 def test_paired_differences_of_synthetic_seeds() -> None:

@@ -19,8 +19,13 @@ ROOT = Path(__file__).parents[1]
 BENCH = ROOT / "docs" / "bench"
 TRUNK = BENCH / "trunk" / "trunk.safetensors"
 # What lite turned on after the committed trunk was trained: the gate, the cross-entropy confidence
-# loss at weight 5, the deterministic flow and the EfficientNet eye.
-LATER_FIELDS = {"model.fusion_gate", "train.confidence_loss", "train.ce_weight", "model.flow_noise", "model.vlm_eye"}
+# loss at weight 5, the deterministic flow, the EfficientNet eye, then (protocol 3) the confidence's view
+# of the mono, the fitted mono as its target's reference and the stereo's upsampling mask in the fusion.
+LATER_FIELDS = {"model.fusion_gate", "train.confidence_loss", "train.ce_weight", "model.flow_noise", "model.vlm_eye",
+                "model.confidence_sees_mono", "model.fusion_mask_from_stereo", "train.confidence_target"}
+# Fields added to the config after the trunk's record was written: their defaults are what the code of that
+# day did (the paper's design), so the record still rebuilds its network.
+ADDED_FIELDS = {"model.confidence_sees_mono", "model.fusion_mask_from_stereo"}
 
 
 def _record() -> dict:
@@ -55,7 +60,11 @@ def test_every_record_cites_a_committed_trunk() -> None:
 def test_the_trunk_record_holds_the_config_it_trained_with() -> None:
     recipe = _record()["recipe"]
     recorded = recipe["resolved_config"]
-    assert Config.from_dict(recorded).to_dict() == recorded  # a whole, valid config
+    rebuilt = Config.from_dict(recorded).to_dict()  # a whole, valid config
+    assert {f"{s}.{k}" for s in ("model", "train") for k in rebuilt[s] if k not in recorded[s]} == ADDED_FIELDS
+    assert all(rebuilt[s][k] is False for s, k in (field.split(".") for field in ADDED_FIELDS))
+    assert {s: {k: v for k, v in part.items() if k in recorded[s]} if isinstance(part, dict) else part
+            for s, part in rebuilt.items()} == recorded
     today = provenance.resolved_config(recipe["preset"], recipe["overrides"])
     differences = provenance.config_differences(recorded, today)
     assert set(differences) == LATER_FIELDS

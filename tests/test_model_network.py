@@ -12,6 +12,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from model.checkpoint import load_checkpoint, load_network, save_checkpoint  # noqa: E402
+from model.confidence import ConfidenceHead  # noqa: E402
 from model.fusion import GlobalFusion, blend, refine_affine  # noqa: E402
 from model.losses import confidence_target, confidence_terms, focal_terms, fusion_loss, sequence_gamma  # noqa: E402
 from model.network import FusionNetwork, FusionOutput  # noqa: E402
@@ -24,7 +25,8 @@ from tests.model_pairs import random_dot_pair  # noqa: E402
 SMALL = {"hidden_dims": [16, 16, 16], "motion_dim": 16, "feature_dim": 32, "vlm_dim": 32, "flow_dim": 32,
          "confidence_dim": 16, "fusion_dim": 16, "vlm_eye_weights": "random"}
 # The paper's design where a test is about it (lite turns on the gate, cross-entropy and a deterministic flow).
-PAPER_DESIGN = {"fusion_gate": False, "confidence_loss": "focal", "flow_noise": True}
+PAPER_DESIGN = {"fusion_gate": False, "confidence_loss": "focal", "flow_noise": True, "confidence_target": "threshold",
+                "confidence_sees_mono": False, "fusion_mask_from_stereo": False}
 
 
 def _tensors(height: int = 64, width: int = 128, d: float = 4.0, seed: int = 0):
@@ -107,25 +109,36 @@ def test_refining_affine_parameters_pools_confident_neighbours() -> None:
     assert torch.allclose(glob, torch.tensor([[[[1.0, mean, 3.0, mean]]]]))
 
 
-@pytest.mark.parametrize(("target", "expected"), [("threshold", [1.0, 0.0, 0.0]), ("closer", [1.0, 1.0, 0.0])])
+@pytest.mark.parametrize(("target", "expected"), [("threshold", [1.0, 0.0, 0.0]), ("closer", [1.0, 1.0, 1.0]),
+                                                  ("closer-fit", [1.0, 1.0, 0.0])])
 def test_the_confidence_target_trusts_the_stereo_where_it_is_closer_than_the_mono(target: str,
                                                                                  expected: list[float]) -> None:
-    """Three 2×2 blocks (one confidence pixel each): the stereo misses by 1, 2, 2 px, the aligned mono
-    by 3, 3, 1 px. The authors' threshold trusts the first block alone; "closer" the first two."""
+    """Three 2×2 blocks (one confidence pixel each): the stereo misses by 1, 2, 2 px; the aligned mono
+    copies the stereo (its per-pixel affine can), the mono fitted per image misses by 3, 3, 1 px. The
+    authors' threshold trusts the first block alone; "closer" all three, since the copy is never closer;
+    "closer-fit" the first two, as the fitted mono is better on the third."""
     cfg = load_preset("lite", {**PAPER_DESIGN, "confidence_target": target}).train
     gt = torch.full((1, 1, 2, 6), 10.0)
     stereo = gt + torch.tensor([1.0, 1.0, 2.0, 2.0, 2.0, 2.0])
-    aligned = gt - torch.tensor([3.0, 3.0, 3.0, 3.0, 1.0, 1.0])
+    fitted = gt - torch.tensor([3.0, 3.0, 3.0, 3.0, 1.0, 1.0])
     valid = torch.ones_like(gt, dtype=torch.bool)
-    mono_error = (gt - aligned).abs() if target == "closer" else None
-    low, low_valid = confidence_target((gt - stereo).abs(), valid, (1, 3), mono_error)
-    assert low.flatten().tolist() == expected and bool(low_valid.all())
     logits = torch.full((1, 1, 1, 3), 2.0)
-    out = FusionOutput(gt, [stereo], stereo, aligned, torch.sigmoid(logits), logits, gt)
+    out = FusionOutput(gt, [stereo], stereo, stereo.clone(), torch.sigmoid(logits), logits, gt, mono_fitted=fitted)
     _, parts = fusion_loss(out, gt, valid, cfg)
     focal = focal_terms(logits, torch.tensor(expected).view(1, 1, 1, 3), cfg.focal_alpha, cfg.focal_gamma)
     assert math.isclose(parts["confidence"], float(focal.sum()) / (12 * 3 / 12), rel_tol=1e-5)
+    low, low_valid = confidence_target((gt - stereo).abs(), valid, (1, 3), (gt - fitted).abs())
+    assert low.flatten().tolist() == [1.0, 1.0, 0.0] and bool(low_valid.all())
     assert load_preset("paper").train.confidence_target == "threshold"  # the authors' target stays the paper's
+
+
+def test_the_fitted_target_needs_the_fitted_mono() -> None:
+    cfg = load_preset("lite", {**PAPER_DESIGN, "confidence_target": "closer-fit"}).train
+    gt = torch.full((1, 1, 2, 2), 10.0)
+    logits = torch.zeros(1, 1, 1, 1)
+    out = FusionOutput(gt, [gt], gt, gt, torch.sigmoid(logits), logits, gt)
+    with pytest.raises(ValueError, match="fitted mono"):
+        fusion_loss(out, gt, torch.ones_like(gt, dtype=torch.bool), cfg)
 
 
 def test_the_loss_equals_a_hand_computation() -> None:
@@ -191,6 +204,48 @@ def test_the_network_gates_only_when_asked() -> None:
         assert torch.allclose(result.disparity, convex_upsample(mixed, mask, 8, config.upsample_border), atol=1e-4), gate
 
 
+def test_the_fused_upsampling_starts_as_the_stereo_branchs() -> None:
+    """With fusion_mask_from_stereo, a fully confident gate and no residual give exactly the stereo map
+    upsampled with the stereo branch's own mask; a fresh upsampler (the paper's) does not."""
+    generator = torch.Generator().manual_seed(0)
+    mono, stereo = torch.rand(1, 1, 4, 6, generator=generator), 5 + 10 * torch.rand(1, 1, 4, 6, generator=generator)
+    hidden, mask = torch.randn(1, 16, 4, 6, generator=generator), torch.randn(1, 9 * 64, 4, 6, generator=generator)
+    confident = torch.ones(1, 1, 4, 6)
+    expected = convex_upsample(stereo, mask, 8, "edge")
+    errors = {}
+    for from_stereo in (True, False):
+        config = load_preset("lite", {**SMALL, "fusion_mask_from_stereo": from_stereo}).model
+        torch.manual_seed(0)
+        fusion = GlobalFusion(config, 16)
+        torch.nn.init.zeros_(fusion.residual.weight)
+        if from_stereo:
+            torch.nn.init.zeros_(fusion.mask.net[-1].weight)
+        with torch.no_grad():
+            errors[from_stereo] = float((fusion(mono, stereo, confident, hidden, mask).disparity - expected).abs().max())
+    assert errors[True] < 1e-4 < errors[False]
+
+
+def test_the_confidence_sees_the_mono_only_when_asked() -> None:
+    """The no-VLM confidence head reads the stereo, the mono fitted to it and their difference
+    (confidence_sees_mono): a fitted mono that disagrees changes its logits; without the option it never
+    reads them, and with it a missing fitted mono is an error, not a silent zero."""
+    generator = torch.Generator().manual_seed(0)
+    cost, features = torch.randn(1, 36, 4, 6, generator=generator), torch.randn(1, 32, 4, 6, generator=generator)
+    stereo = 5 + 10 * torch.rand(1, 1, 4, 6, generator=generator)
+    logits = {}
+    for sees in (True, False):
+        config = load_preset("lite", {**SMALL, "use_vlm": False, "confidence_sees_mono": sees}).model
+        torch.manual_seed(0)
+        head = ConfidenceHead(config, 0)
+        with torch.no_grad():
+            logits[sees] = [head(cost, features=features, disparities=(stereo, fitted))
+                            for fitted in (stereo.clone(), stereo.flip(-1))]
+    assert not torch.allclose(*logits[True]) and torch.equal(*logits[False])
+    with pytest.raises(ValueError, match="fitted mono"):
+        head = ConfidenceHead(load_preset("lite", {**SMALL, "use_vlm": False}).model, 0)
+        head(cost, features=features)
+
+
 def test_the_cross_entropy_confidence_loss_is_the_weighted_bce() -> None:
     """Same batch as the hand computation's below: with confidence_loss "ce" the term is ce_weight·L_b
     over the valid low-resolution pixel, whose gradient at c ≈ 0.84 is ~55× the focal term's."""
@@ -199,7 +254,8 @@ def test_the_cross_entropy_confidence_loss_is_the_weighted_bce() -> None:
     valid = torch.ones_like(gt, dtype=torch.bool)
     valid[0, 0, 1, 3] = False
     logits = torch.tensor([[[[math.log(0.84 / 0.16), -1.0]]]])
-    out = FusionOutput(gt + 0.5, [gt + 1.0], gt + 1.0, gt - 3.0, torch.sigmoid(logits), logits, gt)
+    out = FusionOutput(gt + 0.5, [gt + 1.0], gt + 1.0, gt - 3.0, torch.sigmoid(logits), logits, gt,
+                       mono_fitted=gt - 3.0)
     _, parts = fusion_loss(out, gt, valid, cfg)
     bce = -math.log(0.84)
     assert math.isclose(parts["confidence"], 3.0 * bce / (5 * 2 / 8), rel_tol=1e-5)
@@ -236,6 +292,7 @@ def test_a_deterministic_flow_ignores_the_noise() -> None:
 @pytest.mark.parametrize("overrides", [{}, {"use_vlm": False}, {"confidence_image_features": False},
                                        {"fusion_rule": "released"},
                                        {"fusion_gate": True, "flow_noise": False, "confidence_loss": "ce"},
+                                       {"confidence_sees_mono": False, "fusion_mask_from_stereo": False},
                                        {"vlm_eye": "efficientnet-lite0", "vlm_eye_weights": "random"}])
 def test_gradients_reach_every_trainable_parameter(overrides: dict) -> None:
     config = load_preset("lite", {**SMALL, **overrides})

@@ -44,6 +44,23 @@ def _queued_run(runtime) -> int:  # type: ignore[no-untyped-def]
 
 # ---- launch -------------------------------------------------------------------------------------
 
+def test_a_split_seed_keeps_one_split_over_launch_seeds(runtime) -> None:  # type: ignore[no-untyped-def]
+    """Launch seeds 0, 1, 2 deal 12 videos three ways; with a split seed of its own every one gets that
+    seed's split (what lets a benchmark compare seeds on one split)."""
+    with transaction(runtime.sessions) as s:
+        add_accepted_samples(s, runtime.media, videos=12, frames=1)
+    splits = {}
+    for seed, split_seed in ((0, None), (1, None), (2, None), (1, 0), (2, 0)):
+        with transaction(runtime.sessions) as s:
+            selection = training.DataSelection()
+            launch = training.Launch(split=training.parse_split("train=0.7,val=0.3"), seed=seed, split_seed=split_seed)
+            run = training.create_run(s, runtime.media, runtime.settings.runs_dir, preset="lite",
+                                      config={"preset": "lite"}, selection=selection, launch=launch,
+                                      version=training.pin_selection(s, runtime.media, selection), user=None)
+            splits[seed, split_seed] = json.dumps(run.splits, sort_keys=True)
+    assert len({splits[seed, None] for seed in range(3)}) == 3
+    assert splits[1, 0] == splits[2, 0] == splits[0, None]
+
 def test_launching_with_an_empty_selection_is_refused_with_a_reason(client, tokens, runtime) -> None:  # type: ignore[no-untyped-def]
     response = _launch(client, tokens)
     assert response.status_code == 400

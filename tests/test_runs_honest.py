@@ -19,7 +19,7 @@ from dataset.db import transaction
 from dataset.services import training
 from dataset.tables import JobState, RunState, TrainingRun
 from model.losses import fusion_loss
-from model.network import FusionNetwork
+from model.network import TRUNK_PREFIXES, FusionNetwork
 from model.presets import load_preset
 from model.runs.launcher import TRAINERS_FILE, death_reason, group_members
 from model.train import CANCEL_FILE, EXIT_DIVERGED, EXIT_FAILED, EXIT_SUCCEEDED
@@ -44,6 +44,21 @@ def weights_only(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 # --- the engine --------------------------------------------------------------------------------
+
+def test_a_frozen_trunk_stays_where_it_started_while_the_heads_learn(native: Path, tmp_path: Path) -> None:
+    """train.freeze_trunk: between two steps not one tensor of the mono context encoder or the stereo branch
+    moves (nor a batch-norm statistic), while the VLM, confidence and fusion heads do; a stereo-only network,
+    all trunk, is refused."""
+    run = make_run(tmp_path / "run", native, val=False, steps=2, checkpoint_every=1, keep_last=5, freeze_trunk=True)
+    assert train_here(run) == EXIT_SUCCEEDED
+    first, second = parameters(run, 1), parameters(run, 2)
+    trunk = [name for name in first if name.startswith(TRUNK_PREFIXES)]
+    moved = {name for name in first if not torch.equal(first[name], second[name])}
+    assert trunk and not moved & set(trunk)
+    assert {name.split(".")[0] for name in moved} == {"vlm", "confidence", "fusion"}
+    with pytest.raises(ValueError, match="freeze_trunk"):
+        load_preset("lite", {"freeze_trunk": True, "use_vlm": False, "use_mono": False})
+
 
 @pytest.mark.slow
 def test_a_trainer_checkpoint_loads_weights_only_and_resumes_bit_for_bit(native: Path, tmp_path: Path,

@@ -78,6 +78,9 @@ class Launch:
     rdzv_endpoint: str | None = None  # host:port of the rendezvous for a multi-node run
     split: dict[str, float] = field(default_factory=dict)
     seed: int = 0
+    # What deals the videos into the split: None, ``seed`` (a run's seed changes its split with the rest);
+    # a seed of its own keeps one split over runs of different seeds (a benchmark's paired record).
+    split_seed: int | None = None
 
 
 def run_dir(runs_dir: Path, run_id: int) -> Path:
@@ -232,7 +235,7 @@ def create_run(session: Session, media: MediaStore, runs_dir: Path, *, preset: s
     is what answers show: folders and checkpoints by their labels; their paths go to ``run.json``.
     """
     validate_launch(launch)
-    splits = split_version(version, launch.split, launch.seed)
+    splits = split_version(version, launch.split, launch.seed if launch.split_seed is None else launch.split_seed)
     shown = {**asdict(launch), "init_checkpoint": launch.init_label, "init_stereo": launch.init_stereo_label,
              "data": asdict(selection)}
     shown["data"]["root"] = selection.label or (Path(selection.root).name if selection.root else None)

@@ -98,6 +98,8 @@ class Trainer:
         self.network, payload = self._network(resume)
         self.network.train()
         freeze_batchnorm(self.network)
+        if cfg.freeze_trunk:
+            self.network.freeze_trunk()
         self.params = [p for p in self.network.parameters() if p.requires_grad]
         self.model: nn.Module = self.network
         if world.backend is not None:

@@ -235,19 +235,23 @@ def _lite_overrides(ctx: click.Context, param: click.Parameter, values: tuple[st
 @click.option("--pretrained", type=click.Path(dir_okay=False, exists=True, path_type=Path), default=None,
               help="Fine-tune every network from this trunk (`bench pretrain`'s trunk.safetensors, trunk.json beside "
                    "it). Default: WORK_DIR/pretrain/trunk.safetensors when it exists.")
+@click.option("--stereo-only-pretrained", type=click.Path(dir_okay=False, exists=True, path_type=Path), default=None,
+              help="With --ablations: fine-tune the stereo-only network from this trunk, pre-trained without the "
+                   "mono input (`bench pretrain --stereo-only`), and score it at 0 steps too; without it the "
+                   "stereo-only network starts from --pretrained's trunk, whose context learnt with the mono.")
 @click.option("--scratch", is_flag=True, help="Train from scratch even when WORK_DIR holds a pre-trained trunk.")
 @click.option("--set", "settings", multiple=True, metavar="KEY=VALUE", callback=_lite_overrides,
               help="Override lite's config for every network (repeatable), e.g. --set model.fusion_gate=false: "
                    "how a design is compared with another on the same data, seeds and trunk.")
 def fusion_benchmark(as_json: bool, seeds: int, steps: int | None, work_dir: Path, mono_only: bool,
                      ablations: bool, split: str | None, mono: str, workers: int, pretrained: Path | None,
-                     scratch: bool, settings: dict[str, str]) -> None:
+                     stereo_only_pretrained: Path | None, scratch: bool, settings: dict[str, str]) -> None:
     """The synthetic illusion benchmark: train lite on the product's own samples and rendered captures
     (fine-tuned from the pre-trained trunk when there is one), score fusion, stereo, mono-gt-align and
     sgbm (with --ablations also the no-VLM network's fusion and stereo branch, and stereo_only) on frozen
     held-out rendered pairs (all, picture, mirror, non-illusion), their monocular input the realistic
     estimator's or, with --mono warp, one of another family."""
-    from benchmarks.fusion import DEFAULT_STEPS, FINETUNE_STEPS, run_fusion_bench, run_mono_bench
+    from benchmarks.fusion import DEFAULT_STEPS, FINETUNE_STEPS, load_stereo_only_trunk, run_fusion_bench, run_mono_bench
     from benchmarks.trunk import TRUNK_FILE
 
     if mono == "warp" and split is not None:
@@ -258,14 +262,19 @@ def fusion_benchmark(as_json: bool, seeds: int, steps: int | None, work_dir: Pat
     found = work_dir / TRUNK_FILE
     trunk = None if scratch else pretrained or (found if found.is_file() else None)
     if mono_only:
-        if ablations or workers > 1 or settings:
-            raise click.UsageError("--ablations, --workers and --set are about training, and --mono-only trains "
-                                   "nothing: pass one or the other")
+        if ablations or workers > 1 or settings or stereo_only_pretrained:
+            raise click.UsageError("--ablations, --workers, --stereo-only-pretrained and --set are about training, "
+                                   "and --mono-only trains nothing: pass one or the other")
         _report(run_mono_bench(split=split, mono=mono, work_dir=work_dir, pretrained=trunk), as_json)
         return
     steps = steps or (DEFAULT_STEPS if trunk is None else FINETUNE_STEPS)
+    try:
+        load_stereo_only_trunk(stereo_only_pretrained, ablations)
+    except ValueError as exc:
+        raise click.UsageError(str(exc)) from None
     results = run_fusion_bench(work_dir, seeds=seeds, steps=steps, ablations=ablations, split=split, mono=mono,
-                               workers=workers, pretrained=trunk, overrides=settings)
+                               workers=workers, pretrained=trunk, stereo_only_pretrained=stereo_only_pretrained,
+                               overrides=settings)
     if as_json:
         click.echo(json.dumps(results))
         return
@@ -344,6 +353,9 @@ def _print_fusion(results: dict[str, Any]) -> None:
     else:
         fresh = {name: len(init["fresh"]) for name, init in trunk["init"].items()}
         click.echo(f"pretrained: {trunk['file']} sha256 {trunk['sha256'][:16]}; tensors started fresh: {fresh}")
+    if results.get("stereo_only_pretrained"):
+        own = results["stereo_only_pretrained"]
+        click.echo(f"stereo_only pretrained: {own['file']} sha256 {own['sha256'][:16]}")
     click.echo(f"timings_s {results['timings_s']}")
 
 
