@@ -281,6 +281,34 @@ def fusion_benchmark(as_json: bool, seeds: int, steps: int | None, work_dir: Pat
     _print_fusion(results)
 
 
+@bench.command("compare")
+@click.argument("first", type=click.Path(dir_okay=False, exists=True, path_type=Path))
+@click.argument("second", type=click.Path(dir_okay=False, exists=True, path_type=Path))
+@click.option("--method", default="fusion", show_default=True, help="The method of FIRST compared.")
+@click.option("--other", default=None, help="The method of SECOND it is compared with (default: the same).")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
+def compare_benchmark(first: Path, second: Path, method: str, other: str | None, as_json: bool) -> None:
+    """Two `bench fusion --json` records of the same pairs, frame by frame: METHOD of FIRST minus OTHER of
+    SECOND per region, each record's seeds averaged, with a 95 % interval over scenes — how one design is
+    decided against another on val."""
+    from benchmarks.compare import compare_records
+
+    try:
+        records = [json.loads(path.read_text()) for path in (first, second)]
+        found = compare_records(*records, method=method, other=other)
+    except (ValueError, KeyError) as exc:
+        raise click.UsageError(str(exc).strip("'\"")) from None
+    if as_json:
+        click.echo(json.dumps(found))
+        return
+    click.echo(f"{method} of {first.name} minus {found['other']} of {second.name}, {found['scenes']} scenes "
+               "(< 0: the first is better), 95 % interval over scenes")
+    for region, figures in found["regions"].items():
+        click.echo(f"  {region:13}" + "".join(
+            f"  {key} {v['value']:+.3f} [{v['low']:+.3f}, {v['high']:+.3f}] {v['decided']:9}"
+            for key, v in figures.items()))
+
+
 @bench.command("pretrain")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object.")
 @click.option("--work-dir", type=click.Path(file_okay=False, path_type=Path), default=Path("var/bench-fusion"),
