@@ -22,10 +22,10 @@ TRUNK = BENCH / "trunk" / "trunk.safetensors"
 # loss at weight 5, the deterministic flow, the EfficientNet eye, then (protocol 3) the confidence's view
 # of the mono, the fitted mono as its target's reference and the stereo's upsampling mask in the fusion.
 LATER_FIELDS = {"model.fusion_gate", "train.confidence_loss", "train.ce_weight", "model.flow_noise", "model.vlm_eye",
-                "model.confidence_sees_mono", "model.fusion_mask_from_stereo", "train.confidence_target"}
+                "model.confidence_sees_mono", "model.fusion_mask_from_stereo", "train.confidence_target", "train.freeze_trunk"}
 # Fields added to the config after the trunk's record was written: their defaults are what the code of that
 # day did (the paper's design), so the record still rebuilds its network.
-ADDED_FIELDS = {"model.confidence_sees_mono", "model.fusion_mask_from_stereo"}
+ADDED_FIELDS = {"model.confidence_sees_mono", "model.fusion_mask_from_stereo", "train.freeze_trunk"}
 
 
 def _record() -> dict:
