@@ -1,11 +1,11 @@
 """Test files longest first (a pytest plugin, and the table it reads and writes).
 
-Under ``--dist loadfile`` a worker runs a whole file, and xdist hands files out in collection order, so
-the slowest files (the browser ones, late in the alphabet) were started last: one worker ran a
-minutes-long file alone at the end while the other sat idle. ``tests/crash_safe_scheduling.py`` hands
-the files out longest first instead (classic LPT scheduling), by the seconds in
-``tests/file_durations.json``: per file, the sum of its tests' setup, call and teardown, measured on the
-workers of a real run. A file the table does not know counts as the table's median, so a new file is
+Under ``--dist loadfile`` a worker runs a whole file, and xdist hands the files out by their number of
+tests, most first, so the slowest files, few long tests each (the browser ones, the demo workspace's),
+were started last: one worker could run a long file alone at the end while the other sat idle.
+``tests/crash_safe_scheduling.py`` hands the files out longest first instead (classic LPT scheduling), by
+the seconds in ``tests/file_durations.json``: per file, the sum of its tests' setup, call and teardown,
+measured on the workers of a real run. A file the table does not know counts as the table's median, so a new file is
 neither starved nor forced last.
 
 Refresh the table after adding slow tests or files: ``make test-durations`` (a parallel run with

@@ -33,7 +33,8 @@ def test_an_unknown_file_costs_the_median_and_ties_keep_their_order() -> None:
 
 
 def test_files_start_on_the_workers_longest_first(tmp_path: Path) -> None:
-    # Collection order is alphabetical, the costs the reverse: xdist's own order would start test_a first.
+    # One test a file, so xdist's own order (most tests first) is collection order, alphabetical: it would
+    # start test_a first. The costs are the reverse.
     costs = {f"tests/test_{name}.py": float(cost) for cost, name in enumerate("abcdef", start=1)}
     (tmp_path / "tests").mkdir()
     (tmp_path / "tests" / "file_durations.json").write_text(json.dumps(costs))
