@@ -18,7 +18,7 @@ PYTEST = $(BIN)/python -m pytest
 # torch moves only when this is changed on purpose (`make lock TORCH=torch==2.14.1`).
 TORCH ?= torch==$(shell sed -n 's/^torch==//p' $(CONSTRAINTS))
 
-.PHONY: demo test test-fast lint venv venv-test bench lock clean
+.PHONY: demo test test-fast test-durations lint venv venv-test bench lock clean
 
 demo: $(VENV)/.installed
 	$(BIN)/illusion-studio demo
@@ -31,6 +31,11 @@ test: $(VENV)/.installed-test
 # The quick loop while coding: no browser, nothing slow, nothing that measures.
 test-fast: $(VENV)/.installed-test
 	$(PYTEST) -n $(TEST_WORKERS) --dist loadfile -m "not slow and not browser and not serial" $(PYTEST_ARGS)
+
+# Refresh tests/file_durations.json, each test file's seconds: the parallel part hands out the longest
+# files first, so that it does not end on one worker running a long file alone. Commit the table.
+test-durations: $(VENV)/.installed-test
+	$(PYTEST) -n $(TEST_WORKERS) --dist loadfile -m "not serial" --write-file-durations $(PYTEST_ARGS)
 
 lint: $(VENV)/.installed-test
 	$(BIN)/ruff check .

@@ -27,6 +27,7 @@ from webapp.runtime import Runtime
 # - tests.workers: real worker processes over a real queue (``queue_settings``, ``rt``, ``start_worker``);
 # - tests.fixtures.*: workspaces and data shared by several modules.
 pytest_plugins = [
+    "tests.file_durations",  # before crash_safe_scheduling, which imports it
     "tests.crash_safe_scheduling",
     "tests.browser",
     "tests.workers",

@@ -20,7 +20,9 @@ at 90 minutes after one worker crashed. Here a crash costs at most one failed te
   crash report carries that file (the Python stack of every thread at a segfault), where a worker's
   stderr would be lost in a long CI log.
 
-Remove this module once a pytest-xdist release carries those fixes.
+It also hands the files out longest first, by the table of ``tests/file_durations.py``, so that the run
+does not end on one worker running a long file alone. Remove this module once a pytest-xdist release
+carries those fixes (keeping the longest-first order as a ``LoadFileScheduling`` subclass of its own).
 """
 
 from __future__ import annotations
@@ -36,13 +38,16 @@ import pytest
 from xdist.scheduler import LoadFileScheduling
 from xdist.workermanage import WorkerController
 
+from tests.file_durations import load_costs, longest_first, table_path
+
 
 class CrashSafeLoadFileScheduling(LoadFileScheduling):
     """``LoadFileScheduling`` whose crash recovery requeues only unfinished files, and reruns the test a
-    worker died on once."""
+    worker died on once; it hands out the costliest file left first."""
 
     def __init__(self, config: pytest.Config, log: Any = None) -> None:
         super().__init__(config, log)
+        self.costs = load_costs(table_path(config))
         self.crashed_once: set[str] = set()
         self.rerunning: set[str] = set()
 
@@ -64,6 +69,10 @@ class CrashSafeLoadFileScheduling(LoadFileScheduling):
         return crashitem
 
     def _assign_work_unit(self, node: WorkerController) -> None:
+        # xdist pops the queue's first file, at the initial distribution (two files a worker) as later:
+        # put the costliest first (a requeued file too).
+        if self.workqueue:
+            self.workqueue.move_to_end(longest_first(self.workqueue, self.costs)[0], last=False)
         with contextlib.suppress(OSError):  # "cannot send (already closed?)": remove_node requeues the unit
             super()._assign_work_unit(node)
 
