@@ -145,10 +145,13 @@ FUSION = Network("fusion", {}, {"fusion": "fusion", "stereo": "stereo"})
 # --ablations, the paper's in miniature. no_vlm: the confidence from image features alone (the PF
 # ablation), its own stereo branch scored too. stereo_only: the stereo branch alone (model.use_mono off:
 # its context encoder is fed a constant instead of the mono input, no confidence or fusion, RAFT-Stereo's
-# sequence loss), trained the same way on the same data. Fine-tuned from the trunk it starts handicapped:
-# the trunk's context encoder learnt with the mono input, which stereo_only replaces by a constant.
+# sequence loss), trained the same way on the same data, except that it is all trunk, so it always
+# fine-tunes whole (train.freeze_trunk off; with --set train.freeze_trunk=true the other two hold their
+# trunk). Fine-tuned from the fusion networks' trunk it starts handicapped: that trunk's context encoder
+# learnt with the mono input, which stereo_only replaces by a constant (--stereo-only-pretrained).
 ABLATIONS = (Network("no_vlm", {"model.use_vlm": False}, {"fusion_no_vlm": "fusion", "stereo_no_vlm": "stereo"}),
-             Network("stereo_only", {"model.use_vlm": False, "model.use_mono": False}, {"stereo_only": "stereo"}))
+             Network("stereo_only", {"model.use_vlm": False, "model.use_mono": False, "train.freeze_trunk": False},
+                     {"stereo_only": "stereo"}))
 # Scored, never trained: the trunk composed as the no-VLM network (its fresh confidence and fusion heads
 # from the seed), at 0 steps. What fine-tuning adds is measured against it.
 TRUNK_AT_0 = Network("trunk_0", {"model.use_vlm": False}, {"trunk_0": "fusion", "trunk_0_stereo": "stereo"})

@@ -48,6 +48,12 @@ def test_ablation_configs_differ_from_fusion_only_where_intended() -> None:
     assert NETWORKS["stereo_only"].methods == {"stereo_only": "stereo"}
     with pytest.raises(ValueError, match="use_mono = false"):
         load_preset("lite", {"model.use_mono": False})  # the VLM would condition a confidence that is not there
+    # a fine-tuning that holds the trunk holds the fusing networks'; the stereo-only one, all trunk, trains whole
+    held = {name: load_preset("lite", fusion.network_overrides(network, 20, {"train.freeze_trunk": True}))
+            for name, network in NETWORKS.items()}
+    assert {name: config.train.freeze_trunk for name, config in held.items()} == {
+        "fusion": True, "no_vlm": True, "stereo_only": False}
+    fusion.check_overrides({"train.freeze_trunk": True}, NETWORKS.values())
 
 
 def test_stereo_only_predicts_its_stereo_branch_never_sees_mono_and_trains_every_parameter() -> None:
@@ -223,7 +229,8 @@ def test_report_carries_every_method_the_paired_record_and_the_timings(tmp_path:
     assert all(len(v) == 2 and min(v) > 0 for v in timings["score"].values())
     assert report["pairs"]["split"] == "val" and report["pairs"]["seeds"] == list(fusion.VAL_SEEDS)
     assert report["pairs"]["baseline_m"] == 0.63 and report["protocol"] == fusion.PROTOCOL == 4
-    assert report["networks"]["stereo_only"]["overrides"] == {"model.use_vlm": False, "model.use_mono": False}
+    assert report["networks"]["stereo_only"]["overrides"] == {"model.use_vlm": False, "model.use_mono": False,
+                                                              "train.freeze_trunk": False}
     provenance = report["provenance"]
     assert len(provenance["commit"]["commit"]) == 40 and len(provenance["sources"]["sha256"]) == 64
     assert set(provenance["resolved_configs"]) == {"fusion", "no_vlm", "stereo_only", "trunk_0"}
