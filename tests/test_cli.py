@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -81,27 +80,6 @@ def test_synth_writes_videos(tmp_path: Path) -> None:
     paths = [Path(p) for p in result.stdout.split()]
     assert len(paths) == 2 and all((p / "scene.json").is_file() for p in paths)
     one_line_error(cli("synth", str(tmp_path / "o2"), "--size", "big"), "is not WIDTHxHEIGHT")
-
-
-def test_demo_without_serving_builds_a_complete_workspace(tmp_path: Path) -> None:
-    home = tmp_path / "demo"
-    result = cli("--data-dir", str(home), "demo", "--no-serve", "--videos", "2")
-    assert result.returncode == 0, result.stderr
-    for role in ("annotator", "curator", "admin"):
-        assert f"{role}-demo" in result.stdout
-    # an ingest and a prefilter job per video, then a generation job per annotated frame and one propose
-    # job for the approved frames left to annotate
-    assert "4 of 4 jobs succeeded" in result.stdout and "7 of 7 jobs succeeded" in result.stdout
-    frames = json.loads(cli("--data-dir", str(home), "frames", "list", "--json").stdout)
-    states = [f["state"] for f in frames]
-    assert len(frames) == 28
-    # two videos are too few for a run's splits, so the demo leaves its samples for a curator
-    assert states.count("generated") == 6 and states.count("approved") == 6 and states.count("prefiltered") == 12
-    assert states.count("rejected") == 4  # each video's captioned and blurred frames, by the heuristic prefilter
-    # two videos cannot fill train, val and test (no video in two splits): no run, and the reason
-    assert "no demo training run" in result.stderr and "2 video(s)" in result.stderr
-    again = cli("--data-dir", str(home), "demo", "--no-serve", "--videos", "2")
-    assert again.returncode == 0 and "jobs succeeded" not in again.stdout  # nothing to do twice
 
 
 def test_data_dir_option_beats_the_environment(tmp_path: Path) -> None:

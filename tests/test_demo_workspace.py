@@ -22,7 +22,9 @@ MARKER = ".illusion-studio-demo"
 
 
 def test_the_demo_takes_its_workspace_from_the_environment_too(tmp_path: Path) -> None:
-    """`ILLUSION_STUDIO_HOME=X demo` once failed with "data dir …/var/demo does not exist"."""
+    """`ILLUSION_STUDIO_HOME=X demo` once failed with "data dir …/var/demo does not exist". Without
+    serving, the demo builds a complete workspace (one demo build serves every check of this test: a
+    build takes half a minute)."""
     home = tmp_path / "from-env"
     result = cli("demo", "--no-serve", "--videos", "2", env={"ILLUSION_STUDIO_HOME": str(home)})
     assert result.returncode == 0, result.stderr
@@ -32,7 +34,28 @@ def test_the_demo_takes_its_workspace_from_the_environment_too(tmp_path: Path) -
     # the logins come last, framed
     tail = result.stdout.strip().splitlines()[-8:]
     assert tail[-1].startswith("└") and any("admin-demo" in line for line in tail)
+    _a_complete_workspace(home, result)
     _mirrors_are_mirrors(home, tmp_path)
+
+
+def _a_complete_workspace(home: Path, result: subprocess.CompletedProcess[str]) -> None:
+    """What `demo --no-serve --videos 2` (its output ``result``) left in ``home``, and that a second
+    `demo --no-serve` of the same workspace, by --data-dir this time, has nothing to do."""
+    for role in ("annotator", "curator", "admin"):
+        assert f"{role}-demo" in result.stdout
+    # an ingest and a prefilter job per video, then a generation job per annotated frame and one propose
+    # job for the approved frames left to annotate
+    assert "4 of 4 jobs succeeded" in result.stdout and "7 of 7 jobs succeeded" in result.stdout
+    frames = json.loads(cli("--data-dir", str(home), "frames", "list", "--json").stdout)
+    states = [f["state"] for f in frames]
+    assert len(frames) == 28
+    # two videos are too few for a run's splits, so the demo leaves its samples for a curator
+    assert states.count("generated") == 6 and states.count("approved") == 6 and states.count("prefiltered") == 12
+    assert states.count("rejected") == 4  # each video's captioned and blurred frames, by the heuristic prefilter
+    # two videos cannot fill train, val and test (no video in two splits): no run, and the reason
+    assert "no demo training run" in result.stderr and "2 video(s)" in result.stderr
+    again = cli("--data-dir", str(home), "demo", "--no-serve", "--videos", "2")
+    assert again.returncode == 0 and "jobs succeeded" not in again.stdout  # nothing to do twice
 
 
 def _mirrors_are_mirrors(home: Path, tmp_path: Path) -> None:
