@@ -60,30 +60,100 @@ def stop(proc: subprocess.Popen[str] | subprocess.Popen[bytes]) -> None:
         proc.kill()
 
 
-@functools.cache
-def _demo_videos(videos: int) -> Path:
-    """The demo's synthetic videos, rendered once per test process as `demo` renders them (seed 0, with
-    its spoilt frames): rendering is half of a demo's start, and the files are the same each time."""
-    from dataset.synthetic import write_synthetic_dataset
+# Where the once-per-run demo templates go: set by `_demo_templates_home` below for each test process.
+_tmp_path_factory: pytest.TempPathFactory | None = None
 
-    root = Path(tempfile.mkdtemp(prefix="demo-videos-"))
-    atexit.register(shutil.rmtree, root, True)
-    write_synthetic_dataset(root / "synthetic", videos=videos, seed=0, defects=True)
-    return root / "synthetic"
+
+@pytest.fixture(scope="session", autouse=True)
+def _demo_templates_home(tmp_path_factory: pytest.TempPathFactory) -> None:
+    global _tmp_path_factory
+    _tmp_path_factory = tmp_path_factory
+
+
+def _templates_root() -> Path:
+    """A folder shared by this run's test processes: under xdist, the parent of the workers' base temps
+    (one per run, removed with pytest's old temp dirs); otherwise this process's own base temp."""
+    if _tmp_path_factory is None:  # used outside pytest: a folder of this process's own
+        root = Path(tempfile.mkdtemp(prefix="demo-templates-"))
+        atexit.register(shutil.rmtree, root, True)
+        return root
+    base = _tmp_path_factory.getbasetemp()
+    return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+
+
+@functools.cache
+def demo_template(videos: int) -> Path:
+    """A demo workspace as `illusion-studio demo --no-serve` leaves it (built by that command, once per test
+    run, under a file lock the xdist workers share): a workspace to copy, never to serve or change.
+    Only for demos too small for a training run (one video), where `--no-serve` stops where `demo` starts
+    its server, so a copy is what each test's demo would have prepared itself."""
+    from filelock import FileLock
+
+    assert videos == 1, "a demo of several videos trains its run under --no-serve: not a template to copy"
+    root = _templates_root()
+    template = root / f"demo-template-{videos}"
+    done = template / ".template-built"
+    with FileLock(str(root / f"demo-template-{videos}.lock")):
+        if not done.is_file():
+            shutil.rmtree(template, ignore_errors=True)
+            env = {k: v for k, v in os.environ.items() if not k.startswith("ILLUSION_STUDIO_")}
+            result = subprocess.run([sys.executable, "-m", "webapp.cli", "--data-dir", str(template), "demo",
+                                     "--no-serve", "--videos", str(videos)], cwd=ROOT, env=env,
+                                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=600)
+            assert result.returncode == 0, f"the demo template did not build:\n{result.stdout}"
+            done.write_text("", encoding="utf-8")
+    return template
+
+
+def copy_demo_workspace(template: Path, home: Path) -> None:
+    """Copy the demo ``template`` to the new ``home`` and point what its database holds of the template's
+    absolute paths (the ingested videos' ``original_path`` and their ingest jobs' ``path``) at ``home``:
+    else the demo would take the copy's videos for new ones and ingest them again."""
+    from sqlalchemy import select
+
+    from dataset.db import make_engine, make_session_factory, transaction
+    from dataset.settings import load_settings
+    from dataset.tables import Job, Video
+
+    shutil.copytree(template, home, ignore=shutil.ignore_patterns(".template-built"))
+
+    def moved(path: str) -> str:
+        return str(home / Path(path).relative_to(template)) if Path(path).is_relative_to(template) else path
+
+    # The demo runs without the ILLUSION_STUDIO_* variables, so on the workspace's own SQLite database.
+    engine = make_engine(load_settings(home, database_url="").database_url)
+    try:
+        with transaction(make_session_factory(engine)) as s:
+            for video in s.scalars(select(Video)):
+                video.original_path = moved(video.original_path)
+            for job in s.scalars(select(Job)):
+                if isinstance(job.params.get("path"), str):
+                    job.params = {**job.params, "path": moved(job.params["path"])}
+        with make_session_factory(engine)() as s:
+            left = [p for p in [*s.scalars(select(Video.original_path)),
+                                *(job.params.get("path") for job in s.scalars(select(Job)))]
+                    if isinstance(p, str) and str(template) in p]
+        assert not left, f"the copy of {template} still points into it: {left}"
+    finally:
+        engine.dispose()
 
 
 @contextmanager
 def running_demo(home: Path, videos: int = 1) -> Iterator[str]:
     """`illusion-studio demo` in a subprocess (worker + server), as `make demo` runs it; yields its URL.
-    A new ``home`` gets the demo's mark and its rendered videos first; the demo does the rest."""
+    A new ``home`` of a one-video demo starts as a copy of the run's demo template (what the demo
+    prepares before it serves); the demo finds it prepared and serves it."""
     from webapp.cli.demo import DEMO_MARKER
 
     if not (home / DEMO_MARKER).is_file():
         assert not home.exists() or not any(home.iterdir()), f"{home} is not a new workspace"
-        home.mkdir(parents=True, exist_ok=True)
-        (home / DEMO_MARKER).write_text("Made for a test, as `illusion-studio demo` makes it.\n", encoding="utf-8")
-    if not (home / "synthetic").exists():
-        shutil.copytree(_demo_videos(videos), home / "synthetic")
+        if videos == 1:
+            if home.exists():
+                home.rmdir()
+            copy_demo_workspace(demo_template(videos), home)
+        else:  # a demo that trains: the demo renders and prepares it all itself
+            home.mkdir(parents=True, exist_ok=True)
+            (home / DEMO_MARKER).write_text("Made for a test, as `illusion-studio demo` makes it.\n", encoding="utf-8")
     port = free_port()
     env = {k: v for k, v in os.environ.items() if not k.startswith("ILLUSION_STUDIO_")}
     proc = subprocess.Popen([sys.executable, "-m", "webapp.cli", "--data-dir", str(home), "demo", "--port", str(port),
