@@ -186,6 +186,9 @@ def run_fusion_bench(work_dir: Path, *, seeds: int = 1, steps: int = DEFAULT_STE
     pairs, render_s, info = _held_out(split, mono)
     networks = (FUSION, *ABLATIONS) if ablations else (FUSION,)
     untrained = (*((TRUNK_AT_0,) if trunk else ()), *((STEREO_ONLY_AT_0,) if stereo_only_trunk else ()))
+    # Taken before anything trains: the code that trains is the checkout's now, whatever lands meanwhile.
+    provenance = provenance_block("lite", {n.name: network_overrides(n, steps, overrides)
+                                           for n in (*networks, *untrained)})
     trunks = {n.name: stereo_only_trunk if stereo_only_trunk and n.overrides == ABLATIONS[1].overrides else trunk
               for n in (*networks, *untrained)}
     timed = time.perf_counter()
@@ -218,7 +221,7 @@ def run_fusion_bench(work_dir: Path, *, seeds: int = 1, steps: int = DEFAULT_STE
     record = held_out_record(pairs, [r["scores"] for r in runs], baseline_scores)
     return {
         "protocol": PROTOCOL,
-        "provenance": provenance_block("lite", {n.name: network_overrides(n, steps, overrides) for n in scored}),
+        "provenance": provenance,
         "methods": {**_aggregate([r["methods"] for r in runs]), **_aggregate([baselines])},
         "paired": paired_differences([{**r["methods"], **baselines} for r in runs], "fusion"),
         "intervals": intervals(record, "fusion"),

@@ -182,8 +182,13 @@ def test_report_carries_every_method_the_paired_record_and_the_timings(tmp_path:
     launched before any trains, from its init, the trainings run by ``workers`` at once."""
     trunk_file = _trunk(tmp_path, "trunk.safetensors", {"model.use_vlm": False})
     launched, drained, rendered = _without_training(monkeypatch)
+    trained_before_provenance: list[int] = []
+    provenance_block = fusion.provenance_block
+    monkeypatch.setattr(fusion, "provenance_block",
+                        lambda *a, **kw: trained_before_provenance.append(len(drained)) or provenance_block(*a, **kw))
     report = fusion.run_fusion_bench(tmp_path, seeds=2, steps=20, ablations=True, split="val", workers=2,
                                      pretrained=trunk_file)
+    assert trained_before_provenance == [0]  # the commit and sources are the code that trains, taken first
     assert rendered == [fusion.VAL_SEEDS]
     assert launched == [(s, n) for s in (0, 1) for n in ("fusion", "no_vlm", "stereo_only")]
     assert drained == [2] and report["workers"] == 2
