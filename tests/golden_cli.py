@@ -1,5 +1,5 @@
 """What the golden import tests of the published stereo networks (RAFT-Stereo, Selective-RAFT,
-Selective-IGEV: tests/test_*_import.py) share: the comparison's tolerance, the command line run in a
+Selective-IGEV, MoCha-Stereo: tests/test_*_import.py) share: the comparison's tolerance, the command line run in a
 workspace, an import's accounting of the file's tensors, `predict` on a fixture's pair and the
 deliberate bugs of the predictor's path that the comparison must catch."""
 
@@ -18,6 +18,7 @@ from click.testing import CliRunner
 
 from core.formats import read_pfm, write_rgb
 from model import predictor as predictor_module
+from model.checkpoint import load_checkpoint
 from model.presets import ModelConfig
 from webapp.cli import main
 
@@ -54,6 +55,34 @@ def assert_accounted(doc: dict[str, Any], checkpoint: str, counts: tuple[int, in
     assert (doc["tensors_in_file"], doc["keys_loaded"], doc["duplicates"], len(doc["unused"])) == counts
     assert in_file == loaded + duplicates + unused  # every tensor of the file has its place or its reason
     assert doc["architecture"].items() >= architecture.items()
+
+
+def assert_igev_family_import(home: Path, tmp_path: Path, fixture: dict[str, Any], published: Path, source: str,
+                              name: str, counts: tuple[int, int, int, int]) -> dict[str, Any]:
+    """`checkpoints import --from source` (IGEV's family: its cost volume's span given, --max-disp 192) of the
+    seeded ``published`` file as ``name``: its report accounted, its config and source kept, and `predict`
+    with it the reference's output within tolerance — no sign flip, the demo's 32 iterations by default,
+    ``--iters 31`` another output. Returns the import's report."""
+    imported = cli(home, "checkpoints", "import", "--from", source, str(published), "--max-disp", "192",
+                   "--name", name, "--json")
+    assert imported.exit_code == 0, imported.output
+    doc = json.loads(imported.output)
+    assert_accounted(doc, f"imported:{name}", counts, {})
+    assert doc["architecture"] == {"n_gru_layers": 3, "corr_levels": 2, "corr_radius": 4, "max_disp": 192,
+                                   "iterations": 32, "dtype": "float32", "given": ["max_disp"]}
+    payload = load_checkpoint(home / "checkpoints" / "imported" / f"{name}.pt")
+    assert payload["config"]["preset"] == source and payload["config"]["model"]["max_disp"] == 192
+    assert payload["source"]["from"] == source and not payload["config"]["train"]["amp"]
+    height, width = fixture["shape"]
+    assert height % 32 and width % 32  # the demo's centred padding is exercised on both axes
+    reference = fixture["disparity"]
+    ours = predict_cli(home, tmp_path, fixture, doc["checkpoint"])  # no --iters: the demo's 32
+    assert ours.shape == reference.shape == (height, width)
+    assert excess(ours, reference) <= 0, f"off by up to {np.abs(ours - reference).max():.2e} px"
+    assert excess(-ours, reference) > 0  # the output is the disparity as it is, no sign flip
+    # --iters overrides the default: one iteration short is another output.
+    assert excess(predict_cli(home, tmp_path, fixture, doc["checkpoint"], "--iters", "31"), reference) > 0
+    return doc
 
 
 def patched(target: Any, name: str, value: Any) -> Patch:

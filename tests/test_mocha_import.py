@@ -22,9 +22,8 @@ torch = pytest.importorskip("torch")
 from model.checkpoint import load_checkpoint  # noqa: E402
 from model.mocha_import import Flags, convert  # noqa: E402
 from model.predictor import Predictor  # noqa: E402
-from tests.golden_cli import PADDING_BUGS, assert_accounted, assert_evaluated_beside, excess  # noqa: E402
+from tests.golden_cli import PADDING_BUGS, assert_evaluated_beside, assert_igev_family_import, excess  # noqa: E402
 from tests.golden_cli import cli as _cli  # noqa: E402
-from tests.golden_cli import predict_cli as _predict  # noqa: E402
 from tests.mocha_golden import fixture_state, load_fixture  # noqa: E402
 from tests.selective_igev_golden import fixture_state as igev_state  # noqa: E402
 from tests.selective_igev_golden import load_fixture as igev_fixture  # noqa: E402
@@ -55,26 +54,7 @@ def home(tmp_path: Path) -> Path:
 
 def test_imported_checkpoint_predicts_what_mocha_stereo_does(fixture: dict[str, Any], published: Path,
                                                              home: Path, tmp_path: Path) -> None:
-    imported = _cli(home, "checkpoints", "import", "--from", "mocha-stereo", str(published), "--max-disp", "192",
-                    "--json")
-    assert imported.exit_code == 0, imported.output
-    doc = json.loads(imported.output)
-    assert_accounted(doc, "imported:mocha-stereo", COUNTS, {})
-    assert doc["architecture"] == {"n_gru_layers": 3, "corr_levels": 2, "corr_radius": 4, "max_disp": 192,
-                                   "iterations": 32, "dtype": "float32", "given": ["max_disp"]}
-    payload = load_checkpoint(home / "checkpoints" / "imported" / "mocha-stereo.pt")
-    assert payload["config"]["preset"] == "mocha-stereo" and payload["config"]["model"]["max_disp"] == 192
-    assert payload["source"]["from"] == "mocha-stereo" and not payload["config"]["train"]["amp"]
-
-    height, width = fixture["shape"]
-    assert height % 32 and width % 32  # the demo's centred padding is exercised on both axes
-    reference = fixture["disparity"]
-    ours = _predict(home, tmp_path, fixture, doc["checkpoint"])  # no --iters: the demo's 32
-    assert ours.shape == reference.shape == (height, width)
-    assert excess(ours, reference) <= 0, f"off by up to {np.abs(ours - reference).max():.2e} px"
-    assert excess(-ours, reference) > 0  # the output is the disparity as it is, no sign flip
-    # --iters overrides the default: one iteration short is another output.
-    assert excess(_predict(home, tmp_path, fixture, doc["checkpoint"], "--iters", "31"), reference) > 0
+    assert_igev_family_import(home, tmp_path, fixture, published, "mocha-stereo", "mocha-stereo", COUNTS)
 
 
 def test_the_predictor_path_holds_and_fails_for_each_deliberate_bug(fixture: dict[str, Any]) -> None:

@@ -23,7 +23,7 @@ from model.checkpoint import load_checkpoint  # noqa: E402
 from model.predictor import Predictor  # noqa: E402
 from model.selective_igev_import import Flags, convert, to_theirs  # noqa: E402
 from model.stereo.selective_igev import SelectiveIGEV, SelectiveIGEVConfig  # noqa: E402
-from tests.golden_cli import PADDING_BUGS, assert_accounted, assert_evaluated_beside, excess  # noqa: E402
+from tests.golden_cli import PADDING_BUGS, assert_evaluated_beside, assert_igev_family_import, excess  # noqa: E402
 from tests.golden_cli import cli as _cli  # noqa: E402
 from tests.golden_cli import predict_cli as _predict  # noqa: E402
 from tests.raft_golden import fixture_state as raft_state  # noqa: E402
@@ -57,26 +57,8 @@ def home(tmp_path: Path) -> Path:
 
 def test_imported_checkpoint_predicts_what_selective_igev_does(fixture: dict[str, Any], published: Path,
                                                                home: Path, tmp_path: Path) -> None:
-    imported = _cli(home, "checkpoints", "import", "--from", "selective-igev", str(published), "--max-disp", "192",
-                    "--name", "sigev", "--json")
-    assert imported.exit_code == 0, imported.output
-    doc = json.loads(imported.output)
-    assert_accounted(doc, "imported:sigev", COUNTS, {})
-    assert doc["architecture"] == {"n_gru_layers": 3, "corr_levels": 2, "corr_radius": 4, "max_disp": 192,
-                                   "iterations": 32, "dtype": "float32", "given": ["max_disp"]}
-    payload = load_checkpoint(home / "checkpoints" / "imported" / "sigev.pt")
-    assert payload["config"]["preset"] == "selective-igev" and payload["config"]["model"]["max_disp"] == 192
-    assert payload["source"]["from"] == "selective-igev" and not payload["config"]["train"]["amp"]
-
-    height, width = fixture["shape"]
-    assert height % 32 and width % 32  # the demo's centred padding is exercised on both axes
+    assert_igev_family_import(home, tmp_path, fixture, published, "selective-igev", "sigev", COUNTS)
     reference = fixture["disparity"]
-    ours = _predict(home, tmp_path, fixture, doc["checkpoint"])  # no --iters: the demo's 32
-    assert ours.shape == reference.shape == (height, width)
-    assert excess(ours, reference) <= 0, f"off by up to {np.abs(ours - reference).max():.2e} px"
-    assert excess(-ours, reference) > 0  # the output is the disparity as it is, no sign flip
-    # --iters overrides the default: one iteration short is another output.
-    assert excess(_predict(home, tmp_path, fixture, doc["checkpoint"], "--iters", "31"), reference) > 0
     # max_disp shapes the output though no tensor holds it: a wrong --max-disp is caught.
     wrong = _cli(home, "checkpoints", "import", "--from", "selective-igev", str(published), "--max-disp", "384",
                  "--name", "sigev-384")
