@@ -85,6 +85,20 @@ def assert_igev_family_import(home: Path, tmp_path: Path, fixture: dict[str, Any
     return doc
 
 
+def assert_predictor_path_catches_bugs(network: torch.nn.Module, config: Any, fixture: dict[str, Any]) -> None:
+    """The predictor's path — the one `predict` and `evaluate` take — gives the fixture's reference output
+    with ``network`` and ``config`` (a conversion's), and misses it under each of PADDING_BUGS."""
+    predictor = predictor_module.Predictor(network, config)
+
+    def predict() -> np.ndarray:
+        return predictor.predict(fixture["left"], fixture["right"]).disparity
+
+    assert excess(predict(), fixture["disparity"]) <= 0
+    for bug, patch in PADDING_BUGS.items():
+        with patch():
+            assert excess(predict(), fixture["disparity"]) > 0, f"{bug} went unnoticed"
+
+
 def patched(target: Any, name: str, value: Any) -> Patch:
     """A context manager factory that sets ``target.name`` to ``value`` while it is entered."""
     @contextmanager

@@ -13,7 +13,6 @@ import json
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -21,8 +20,11 @@ torch = pytest.importorskip("torch")
 
 from model.checkpoint import load_checkpoint  # noqa: E402
 from model.mocha_import import Flags, convert  # noqa: E402
-from model.predictor import Predictor  # noqa: E402
-from tests.golden_cli import PADDING_BUGS, assert_evaluated_beside, assert_igev_family_import, excess  # noqa: E402
+from tests.golden_cli import (  # noqa: E402
+    assert_evaluated_beside,
+    assert_igev_family_import,
+    assert_predictor_path_catches_bugs,
+)
 from tests.golden_cli import cli as _cli  # noqa: E402
 from tests.mocha_golden import fixture_state, load_fixture  # noqa: E402
 from tests.selective_igev_golden import fixture_state as igev_state  # noqa: E402
@@ -59,15 +61,7 @@ def test_imported_checkpoint_predicts_what_mocha_stereo_does(fixture: dict[str, 
 
 def test_the_predictor_path_holds_and_fails_for_each_deliberate_bug(fixture: dict[str, Any]) -> None:
     conversion = convert(fixture_state(fixture), Flags(max_disp=192))
-    predictor = Predictor(conversion.network, conversion.config)
-
-    def predict() -> np.ndarray:
-        return predictor.predict(fixture["left"], fixture["right"]).disparity
-
-    assert excess(predict(), fixture["disparity"]) <= 0
-    for bug, patch in PADDING_BUGS.items():  # the predictor's path, the one `predict` and `evaluate` take
-        with patch():
-            assert excess(predict(), fixture["disparity"]) > 0, f"{bug} went unnoticed"
+    assert_predictor_path_catches_bugs(conversion.network, conversion.config, fixture)
 
 
 def test_the_cli_refuses_what_the_tensors_do_not_settle_in_one_line(published: Path, home: Path,
