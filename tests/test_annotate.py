@@ -119,6 +119,21 @@ def test_click_segment_save_and_submit(client, tokens, scene, runtime) -> None: 
         assert s.scalar(select(AuditEntry.action).where(AuditEntry.target_id == frame_id)) == "annotation.submit"
 
 
+def test_the_embedding_in_memory_answers_only_for_its_own_workspace(scene, runtime, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """One process serving two workspaces (the suite's workers do) with the same image: the second computes
+    its own embedding, says so, and keeps it in its own cache."""
+    from dataset.services.segmentation import _hot_embedding, embedding_cache, settings_segmenter
+
+    with runtime.sessions() as s:
+        frame = s.scalars(select(Frame)).first()
+    other = runtime.settings.model_copy(update={"home": tmp_path / "other"})
+    segmenter = settings_segmenter(runtime.settings)
+    cached = [_hot_embedding(settings, segmenter, frame, runtime.media)[1]
+              for settings in (runtime.settings, runtime.settings, other, other)]
+    assert cached == [False, True, False, True]
+    assert embedding_cache(other).get(frame.content_sha256, segmenter.model_id) is not None
+
+
 @pytest.mark.parametrize(("body", "message"), [
     ({"version": 0, "regions": [{"pair": 0, "kind": "support", "mask": None}]}, "region 0"),
     ({"version": 0, "regions": [{"pair": 0, "kind": "glass", "mask": {}}]}, "kind (illusion or support)"),

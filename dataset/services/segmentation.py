@@ -89,7 +89,7 @@ def segment(settings: Settings, media: MediaStore, frame: Frame, body: dict[str,
             "model_id": segmenter.model_id, "area": int(mask.sum())}
 
 
-_HOT: OrderedDict[tuple[str, str], Embedding] = OrderedDict()
+_HOT: OrderedDict[tuple[str, str, str], Embedding] = OrderedDict()
 _HOT_LOCK = threading.Lock()
 _HOT_SIZE = 8  # embeddings kept decoded in memory: an annotator's current and next frames, several annotators
 
@@ -100,14 +100,16 @@ def _hot_embedding(settings: Settings, segmenter: Segmenter, frame: Frame, media
     Reading a SAM2 embedding from disk costs tens of milliseconds at 1080p, every click; an
     annotator clicks the same frame many times, so the decoded embedding stays in memory.
     """
-    key = (frame.content_sha256, segmenter.model_id)
+    # Keyed by the disk cache it stands in front of: "cached" means this workspace computed it, even
+    # where one process serves several workspaces (an app factory called twice, the test suite).
+    cache = embedding_cache(settings)
+    key = (str(cache.root), frame.content_sha256, segmenter.model_id)
     with _HOT_LOCK:
         if key in _HOT:
             _HOT.move_to_end(key)
             return _HOT[key], True
     # The image is decoded only on a cache miss: a click must not pay for a 1080p PNG decode.
-    embedding, cached = cached_embedding(segmenter, embedding_cache(settings),
-                                         lambda: load_rgb(media, frame.media_key), frame.content_sha256)
+    embedding, cached = cached_embedding(segmenter, cache, lambda: load_rgb(media, frame.media_key), frame.content_sha256)
     with _HOT_LOCK:
         _HOT[key] = embedding
         while len(_HOT) > _HOT_SIZE:
