@@ -18,7 +18,8 @@ at 90 minutes after one worker crashed. Here a crash costs at most one failed te
   INTERNALERROR ending the run: it stays the dead worker's, and goes back on the queue with the rest;
 - the failure says why the worker died: each worker's faulthandler writes to a file of its own, and a
   crash report carries that file (the Python stack of every thread at a segfault), where a worker's
-  stderr would be lost in a long CI log.
+  stderr would be lost in a long CI log, and the files the worker had run, in order (a crash in the
+  garbage collector is another file's garbage).
 
 It also hands the files out longest first, by the table of ``tests/file_durations.py``, so that the run
 does not end on one worker running a long file alone. Remove this module once a pytest-xdist release
@@ -50,6 +51,7 @@ class CrashSafeLoadFileScheduling(LoadFileScheduling):
         self.costs = load_costs(table_path(config))
         self.crashed_once: set[str] = set()
         self.rerunning: set[str] = set()
+        self.history: dict[str, list[str]] = {}  # a crashed test → the files its worker had started, in order
 
     def remove_node(self, node: WorkerController) -> str | None:
         workload = self.assigned_work.pop(node)
@@ -57,6 +59,8 @@ class CrashSafeLoadFileScheduling(LoadFileScheduling):
         if not unfinished:
             return None
         crashitem = next(nodeid for unit in unfinished.values() for nodeid, done in unit.items() if not done)
+        crashed_in = self._split_scope(crashitem)
+        self.history[crashitem] = [scope for scope, unit in workload.items() if any(unit.values()) or scope == crashed_in]
         if crashitem in self.crashed_once:
             self.rerunning.discard(crashitem)
             unfinished[self._split_scope(crashitem)][crashitem] = True
@@ -115,6 +119,9 @@ def pytest_handlecrashitem(crashitem: str, report: pytest.TestReport, sched: Any
     """Add what the dead worker's faulthandler wrote (empty when it exited without a fatal error); a test
     that goes to a fresh worker is reported ``rerun``, not failed."""
     node = getattr(report, "node", None)
+    ran = getattr(sched, "history", {}).get(crashitem)
+    if ran:  # before the stack, which a CI log may cut short
+        report.longrepr = f"{report.longrepr}\nthe worker's files, in the order it ran them: {', '.join(ran)}"
     log = getattr(node, "workerinput", {}).get(CRASH_LOG)
     with contextlib.suppress(OSError):
         text = Path(log).read_text(errors="replace").strip() if log else ""

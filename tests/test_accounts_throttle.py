@@ -142,28 +142,31 @@ def test_slowed_logins_wait_two_per_address_and_on_half_the_threads(app, waits, 
     from webapp import throttle
 
     monkeypatch.setattr(throttle.LoginCounters, "wait_s", lambda self, settings: 3.0)
-    assert throttle.waiting_logins.at_once == 4
+    slots = throttle.waiting_logins(app)
+    assert slots.at_once == 4
     with ExitStack() as held:
-        assert all(held.enter_context(throttle.waiting_logins.slot("203.0.113.9")) for _ in range(2))
+        assert all(held.enter_context(slots.slot("203.0.113.9")) for _ in range(2))
         answer = login(from_address(app, "203.0.113.9"), "admin")
         assert answer.status_code == 429 and answer.headers["Retry-After"] == "3"
         assert "try again in 3 seconds" in answer.get_data(as_text=True)
         assert waits == []
         assert login(from_address(app, "198.51.100.7"), "admin").status_code == 302 and waits == [3.0]
-        assert all(held.enter_context(throttle.waiting_logins.slot(f"192.0.2.{i}")) for i in range(2))
+        assert all(held.enter_context(slots.slot(f"192.0.2.{i}")) for i in range(2))
         assert login(from_address(app, "198.51.100.7"), "admin").status_code == 429 and waits == [3.0]
     assert login(from_address(app, "203.0.113.9"), "admin").status_code == 302 and waits == [3.0, 3.0]
 
 
-def test_the_waiting_slots_follow_the_servers_threads(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+def test_the_waiting_slots_follow_the_servers_threads(app, settings, runtime) -> None:  # type: ignore[no-untyped-def]
+    """Each app has its own slots, sized for its server: a second app in the process (the suite runs
+    many) leaves the first's alone."""
     from webapp import throttle
+    from webapp.app import create_app
 
-    monkeypatch.setattr(throttle.waiting_logins, "at_once", throttle.waiting_logins.at_once)  # restored after
-    throttle.size_for_server(16)
-    assert throttle.waiting_logins.at_once == 8
-    throttle.size_for_server(1)
-    with throttle.waiting_logins.slot("203.0.113.9") as first, throttle.waiting_logins.slot("198.51.100.7") as second:
+    assert throttle.WaitingLogins.for_server(16).at_once == 8
+    small = throttle.waiting_logins(create_app(settings, runtime, threads=1))
+    with small.slot("203.0.113.9") as first, small.slot("198.51.100.7") as second:
         assert first and not second
+    assert throttle.waiting_logins(app).at_once == 4
 
 
 def test_a_new_login_ends_the_browsers_old_session_on_the_server(app) -> None:  # type: ignore[no-untyped-def]

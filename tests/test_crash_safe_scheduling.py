@@ -33,6 +33,8 @@ def test_a_test_that_always_crashes_costs_one_failure(tmp_path: Path, workers: i
     run = _run(tmp_path, workers)
     assert "1 failed, 4 passed, 1 rerun" in run.stdout, run.stdout + run.stderr
     assert run.stdout.count("node down") == 2, run.stdout  # the first worker and the rerun's; no third try
+    if workers == 1:  # what the dead worker had run before, in order (its first file passed whole)
+        assert "the worker's files, in the order it ran them: test_a.py, test_b.py" in run.stdout, run.stdout
 
 
 def test_a_crash_that_does_not_recur_passes_on_the_rerun_and_is_still_reported(tmp_path: Path) -> None:

@@ -23,7 +23,7 @@ from webapp.headers import init_headers
 from webapp.json_provider import FiniteJSONProvider
 from webapp.redact import init_redaction
 from webapp.runtime import Runtime
-from webapp.throttle import init_throttle
+from webapp.throttle import DEFAULT_SERVER_THREADS, init_throttle
 
 
 class AsciiIntegerConverter(IntegerConverter):
@@ -51,8 +51,8 @@ def static_dir() -> Path:
     return packaged if packaged.is_dir() else package.parent / "static"
 
 
-def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
-    """Build the app for ``settings``; tests may pass a shared ``runtime``."""
+def create_app(settings: Settings, runtime: Runtime | None = None, *, threads: int = DEFAULT_SERVER_THREADS) -> Flask:
+    """Build the app for ``settings``, served by ``threads`` worker threads; tests may pass a shared ``runtime``."""
     rt = runtime or Runtime(settings)
     # Part files of uploads a killed server left behind (a live upload keeps writing its part).
     clean_incoming(rt.media, older_than_s=STALE_UPLOAD_S)
@@ -90,7 +90,7 @@ def create_app(settings: Settings, runtime: Runtime | None = None) -> Flask:
         if db is not None:
             db.close()
 
-    init_throttle(app, settings)
+    init_throttle(app, settings, threads)
     init_headers(app, settings)
     init_auth(app)
 

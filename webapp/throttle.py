@@ -124,8 +124,8 @@ limiter = Limiter(key_func=client_key)
 
 
 class WaitingLogins:
-    """The slowed logins this process has waiting: at most ``per_address`` for one client
-    address and ``at_once`` in all (a wait holds a server thread)."""
+    """The slowed logins one app has waiting: at most ``per_address`` for one client address and
+    ``at_once`` in all (a wait holds a server thread)."""
 
     def __init__(self, at_once: int, per_address: int = WAITING_PER_ADDRESS) -> None:
         self.at_once = at_once
@@ -152,12 +152,15 @@ class WaitingLogins:
                         del self._waiting[address]
 
 
-waiting_logins = WaitingLogins(at_once=DEFAULT_SERVER_THREADS // 2)
+    @classmethod
+    def for_server(cls, threads: int) -> WaitingLogins:
+        """Slots for a server of ``threads`` worker threads: slowed logins wait on at most half (at least one)."""
+        return cls(at_once=max(1, threads // 2))
 
 
-def size_for_server(threads: int) -> None:
-    """Let slowed logins wait on at most half of the server's ``threads`` worker threads (at least one)."""
-    waiting_logins.at_once = max(1, threads // 2)
+def waiting_logins(app: Flask | None = None) -> WaitingLogins:
+    """``app``'s (default: the current app's) slots for slowed logins, sized by :func:`init_throttle`."""
+    return (app or current_app).extensions["waiting_logins"]  # type: ignore[no-any-return]
 
 
 @dataclass(frozen=True)
@@ -244,11 +247,11 @@ class LoginCounters:
 
     def slow_down(self, settings: Settings) -> int | None:
         """Wait :meth:`wait_s` before the password is checked (a plain sleep: no lock is held), in
-        one of :data:`waiting_logins`' slots; when this address's or the server's are all taken,
+        one of :func:`waiting_logins`' slots; when this address's or the server's are all taken,
         return the seconds to come back after instead (no wait), so waits cannot hold every thread."""
         if (seconds := self.wait_s(settings)) <= 0:
             return None
-        with waiting_logins.slot(self.client) as granted:
+        with waiting_logins().slot(self.client) as granted:
             if not granted:
                 return max(1, math.ceil(seconds))
             time.sleep(seconds)
@@ -400,8 +403,11 @@ def storage_uri(settings: Settings) -> str:
     return f"{SqliteLimitStorage.STORAGE_SCHEME[0]}:///{settings.home / 'ratelimit.db'}"
 
 
-def init_throttle(app: Flask, settings: Settings) -> None:
-    """Counters in :func:`storage_uri`'s storage, for clients resolved behind ``trusted_proxies``."""
+def init_throttle(app: Flask, settings: Settings, threads: int = DEFAULT_SERVER_THREADS) -> None:
+    """Counters in :func:`storage_uri`'s storage, for clients resolved behind ``trusted_proxies``; slots
+    for the slowed logins of a server of ``threads`` worker threads (the app's own: several apps in one
+    process, as in the tests, do not share them)."""
+    app.extensions["waiting_logins"] = WaitingLogins.for_server(threads)
     app.wsgi_app = TrustedProxies(app.wsgi_app, settings.trusted_proxies)  # type: ignore[method-assign]
     app.config.update(RATELIMIT_STORAGE_URI=storage_uri(settings), RATELIMIT_STRATEGY="fixed-window",
                       RATELIMIT_SWALLOW_ERRORS=True)

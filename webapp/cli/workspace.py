@@ -67,11 +67,9 @@ def make_server(settings: Settings, rt: Runtime, host: str | None, port: int | N
     from webapp.admission import make_admission
     from webapp.app import create_app
     from webapp.server import Server
-    from webapp.throttle import size_for_server
 
     logging.basicConfig()  # the app's modules report through logging
-    size_for_server(threads)  # slowed logins may hold at most half of these threads
-    app = create_app(settings, rt)
+    app = create_app(settings, rt, threads=threads)  # slowed logins may hold at most half of these threads
     return Server(app, host or settings.host, settings.port if port is None else port, threads,
                   admit=make_admission(app, settings, rt))
 
