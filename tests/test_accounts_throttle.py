@@ -136,6 +136,19 @@ def test_a_client_throttled_on_the_api_gets_a_429_page_not_a_500(app) -> None:  
         assert response.status_code == 429 and "<h1>429</h1>" in response.get_data(as_text=True)
 
 
+def test_apps_count_in_their_own_storage(app, settings, runtime, tmp_path, waits) -> None:  # type: ignore[no-untyped-def]
+    """Two apps in one process (the suite runs many) count in their own storage: a workspace of its own
+    (its ratelimit.db) does not see the other's failures; one deployment's Redis under one queue name does."""
+    from webapp.app import create_app
+
+    other = create_app(settings.model_copy(update={"home": tmp_path / "other"}), runtime)
+    for _ in range(3):
+        assert login(from_address(app, "203.0.113.9"), "admin", "wrong-password").status_code == 401
+    assert login(from_address(app, "203.0.113.9"), "admin").status_code == 429
+    shared = settings.queue_url.startswith("redis://")
+    assert login(from_address(other, "203.0.113.9"), "admin").status_code == (429 if shared else 302)
+
+
 def test_slowed_logins_wait_two_per_address_and_on_half_the_threads(app, waits, monkeypatch) -> None:  # type: ignore[no-untyped-def]
     """A slowed login past its address's two waiting slots, or past the server's (half of `serve`'s 8
     threads), is told to come back, with no wait and no password check; other addresses' still wait."""

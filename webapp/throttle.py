@@ -68,7 +68,9 @@ bad tokens from the same proxy therefore never lock a script out. The secrets ar
 limit makes guessing visible and cheap to refuse, it does not guard a guessable secret.
 
 Storage: the deployment's Redis when the queue runs on Redis; otherwise a small SQLite file in the
-data dir (:class:`SqliteLimitStorage`). The `limits` package ships memory, Redis, Memcached and
+data dir (:class:`SqliteLimitStorage`). The counters are `limits`' fixed windows, used directly: these
+are counters a login consults, not limits on routes, so Flask-Limiter's decorators (built on the same
+package) have nothing to add. The `limits` package ships memory, Redis, Memcached and
 MongoDB storages; memory counts per process (a multi-process server would multiply every limit)
 and the other two are services this app does not otherwise need, whereas a SQLite file is shared
 by every process on the machine, like the default job queue. While the counters are unreachable
@@ -91,10 +93,10 @@ from dataclasses import dataclass
 from typing import Any, TypeVar
 
 from flask import Flask, Response, current_app, request
-from flask_limiter import Limiter
 from itsdangerous import BadData, URLSafeTimedSerializer
 from limits import RateLimitItem, parse
-from limits.storage import Storage
+from limits.storage import Storage, storage_from_string
+from limits.strategies import FixedWindowRateLimiter
 
 from dataset.settings import Settings
 from webapp.proxies import TrustedProxies, parse_address
@@ -118,9 +120,6 @@ def client_key() -> str:
     if address.version == 6:
         return str(ipaddress.ip_network(f"{address}/64", strict=False))
     return str(address)
-
-
-limiter = Limiter(key_func=client_key)
 
 
 class WaitingLogins:
@@ -163,6 +162,11 @@ def waiting_logins(app: Flask | None = None) -> WaitingLogins:
     return (app or current_app).extensions["waiting_logins"]  # type: ignore[no-any-return]
 
 
+def _counters() -> FixedWindowRateLimiter:
+    """The current app's fixed-window counters, in its storage (:func:`init_throttle`)."""
+    return current_app.extensions["rate_limiter"]  # type: ignore[no-any-return]
+
+
 @dataclass(frozen=True)
 class Counter:
     """One fixed-window counter of failures (or attempts): its limit and what it counts for (``key``)."""
@@ -171,25 +175,25 @@ class Counter:
     key: tuple[str, ...]
 
     def count(self) -> int:
-        return limiter.limiter.storage.get(self.limit.key_for(*self.key))
+        return _counters().storage.get(self.limit.key_for(*self.key))
 
     def exceeded(self) -> bool:
         return self.count() >= self.limit.amount
 
     def hit(self) -> None:
-        limiter.limiter.hit(self.limit, *self.key)
+        _counters().hit(self.limit, *self.key)
 
     def attempt(self) -> bool:
         """Count one more and say whether that kept within the limit: one atomic step in the storage,
         so of parallel requests that all found room before any counted, only the limit's number pass."""
-        return limiter.limiter.hit(self.limit, *self.key)
+        return _counters().hit(self.limit, *self.key)
 
     def clear(self) -> None:
-        limiter.limiter.clear(self.limit, *self.key)
+        _counters().clear(self.limit, *self.key)
 
     def retry_after(self) -> int:
         """Whole seconds until this window ends (at least 1)."""
-        reset = limiter.limiter.get_window_stats(self.limit, *self.key).reset_time
+        reset = _counters().get_window_stats(self.limit, *self.key).reset_time
         return max(1, int(reset - time.time()) + 1)
 
 
@@ -405,13 +409,11 @@ def storage_uri(settings: Settings) -> str:
 
 def init_throttle(app: Flask, settings: Settings, threads: int = DEFAULT_SERVER_THREADS) -> None:
     """Counters in :func:`storage_uri`'s storage, for clients resolved behind ``trusted_proxies``; slots
-    for the slowed logins of a server of ``threads`` worker threads (the app's own: several apps in one
-    process, as in the tests, do not share them)."""
+    for the slowed logins of a server of ``threads`` worker threads. Both are the app's own: several
+    apps in one process (the tests) neither share them nor take over each other's storage."""
+    app.extensions["rate_limiter"] = FixedWindowRateLimiter(storage_from_string(storage_uri(settings)))
     app.extensions["waiting_logins"] = WaitingLogins.for_server(threads)
     app.wsgi_app = TrustedProxies(app.wsgi_app, settings.trusted_proxies)  # type: ignore[method-assign]
-    app.config.update(RATELIMIT_STORAGE_URI=storage_uri(settings), RATELIMIT_STRATEGY="fixed-window",
-                      RATELIMIT_SWALLOW_ERRORS=True)
-    limiter.init_app(app)
 
 
 class SqliteLimitStorage(Storage):
