@@ -143,9 +143,13 @@ def test_stop_recorded_ends_children_in_sessions_of_their_own(tmp_path: Path) ->
     try:
         until(lambda: len(group_members(group.pgid)) == 3, 20, "the children")
         record_group(tmp_path, group.pgid)
-        assert sorted(recorded_members(tmp_path)) == sorted(group_members(group.pgid))
+        members = group_members(group.pgid)
+        assert sorted(recorded_members(tmp_path)) == members
         assert stop_recorded(tmp_path, grace_s=0.5)
         assert group_members(group.pgid) == [] and not (tmp_path / TRAINERS_FILE).exists()
+        # The SIGTERM ended the leader, and its children (SIGTERM ignored) went to init, out of the
+        # group's tree: they must have been killed all the same, not left to sleep on unseen.
+        until(lambda: not any(alive(pid) for pid in members), 5, "the children's end")
     finally:
         group.stop(grace_s=0.5)
 

@@ -26,7 +26,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -125,14 +125,25 @@ class ProcessGroup:
 
 def stop_group(pgid: int, grace_s: float = STOP_GRACE_S) -> None:
     """SIGTERM process group ``pgid`` (torchrun passes it on to its ranks), then SIGKILL every
-    group of what is left of it (see :func:`group_members`) after ``grace_s`` seconds."""
+    group of what is left of it (see :func:`group_members`) after ``grace_s`` seconds. What is left
+    includes its processes of before the SIGTERM: a child in a session of its own whose parent the
+    SIGTERM ended is reparented out of the tree, and would otherwise live on unseen."""
+    before = {pid: start_time(pid) for pid in group_members(pgid)}
     _signal_group(pgid, signal.SIGTERM)
     deadline = time.monotonic() + grace_s
-    while time.monotonic() < deadline and group_members(pgid):
+    while time.monotonic() < deadline and _left(pgid, before)[0]:
         time.sleep(0.1)
-    table = _processes()
-    for group in {pgid} | {table[pid][1] for pid in _tree(pgid, table)}:
+    left, table = _left(pgid, before)
+    for group in {pgid} | {table[pid][1] for pid in left}:
         _signal_group(group, signal.SIGKILL)
+
+
+def _left(pgid: int, before: dict[int, int | None]) -> tuple[set[int], dict[int, tuple[int, int]]]:
+    """The live processes of group ``pgid``, of ``before`` (pid → start time: the same processes, not
+    reused pids) and their descendants; with the process table they were read from."""
+    table = _processes()
+    alive = {pid for pid, started in before.items() if pid in table and start_time(pid) == started}
+    return _tree(pgid, table, alive), table
 
 
 def _signal_group(pgid: int, sig: int) -> None:
@@ -165,8 +176,9 @@ def _processes() -> dict[int, tuple[int, int]]:
     return table
 
 
-def _tree(pgid: int, table: dict[int, tuple[int, int]]) -> set[int]:
-    found = {pid for pid, (_, group) in table.items() if group == pgid}
+def _tree(pgid: int, table: dict[int, tuple[int, int]], roots: Iterable[int] = ()) -> set[int]:
+    """The processes of group ``pgid`` and ``roots``, with every descendant, in ``table``."""
+    found = {pid for pid, (_, group) in table.items() if group == pgid} | {pid for pid in roots if pid in table}
     grew = True
     while grew:
         children = {pid for pid, (parent, _) in table.items() if parent in found} - found
