@@ -63,7 +63,7 @@ class CrashSafeLoadFileScheduling(LoadFileScheduling):
         self.history[crashitem] = [scope for scope, unit in workload.items() if any(unit.values()) or scope == crashed_in]
         if crashitem in self.crashed_once:
             self.rerunning.discard(crashitem)
-            unfinished[self._split_scope(crashitem)][crashitem] = True
+            unfinished[crashed_in][crashitem] = True
         else:
             self.crashed_once.add(crashitem)
             self.rerunning.add(crashitem)
